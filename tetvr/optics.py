@@ -1,0 +1,178 @@
+"""The optical model shared by every renderer in tetvr.
+
+About this technique
+--------------------
+tetvr renders with the emission–absorption model (Max 1995). Along a viewing ray
+parameterised by distance ``t`` from where it enters the data, with extinction
+``tau(t)`` and emitted colour ``c(t)``::
+
+    I     = integral_0^L  c(t) tau(t) exp(-Theta(t)) dt,   Theta(t) = integral_0^t tau
+    alpha = 1 - exp(-Theta(L))
+
+and the pixel holds premultiplied ``(I, alpha)``. The transfer function gives an
+*opacity* ``a`` rather than an extinction; it is converted with the unit distance ``u``::
+
+    tau = -ln(1 - a) / u            (a clamped to MAX_OPACITY < 1)
+
+so a slab of thickness ``u`` at constant opacity ``a`` has alpha exactly ``a``: the
+convention of ParaView's image-data ray caster. The tetrahedra, the CT ray caster, the
+pre-integration table and the CPU reference all use these functions, so they agree by
+construction.
+
+Exact pieces
+------------
+Between two transfer-function control points both ``c`` and ``a`` are linear in the
+scalar, and the scalar is linear along a ray inside a tetrahedron, so on such a *piece*
+``c`` and ``a`` are linear in ``t``. Then
+
+* the optical depth has a closed form (the mean of ``-ln x`` over an interval), and
+* by parts, ``I = c0 - c1 T(L) + c' integral_0^L T(t) dt`` with ``T = exp(-Theta)``,
+  a smooth monotone function in [0, 1] that Gauss–Legendre quadrature integrates to
+  near machine precision once the piece is cut into sub-pieces of optical depth <= 1/2.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "MAX_OPACITY",
+    "extinction",
+    "mean_neg_log",
+    "piece_optical_depth",
+    "integrate_pieces",
+]
+
+#: Opacities are clamped below 1 so that extinction stays finite: -ln(1e-6) = 13.8 per u.
+MAX_OPACITY = 1.0 - 1e-6
+
+# Gauss-Legendre nodes/weights on [0, 1]; 6 nodes are exact for degree-11 polynomials.
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(6)
+_GL_X = 0.5 * (_GL_X + 1.0)
+_GL_W = 0.5 * _GL_W
+# Sub-pieces carry at most this optical depth; beyond _THETA_CUT the light is gone.
+_SUB_THETA = 0.5
+_THETA_CUT = 40.0
+_MAX_SUB = int(np.ceil(_THETA_CUT / _SUB_THETA))
+
+Array = NDArray[np.float64]
+
+
+def extinction(opacity: Array | float, unit_distance: float) -> Array:
+    """Extinction coefficient ``tau = -ln(1 - a) / u`` with ``a`` clamped to MAX_OPACITY."""
+    a = np.clip(np.asarray(opacity, dtype=np.float64), 0.0, MAX_OPACITY)
+    return -np.log1p(-a) / unit_distance
+
+
+def mean_neg_log(x0: Array, x1: Array) -> Array:
+    """Mean of ``-ln x`` over ``[x0, x1]`` (x > 0), stable when ``x0 ~ x1``.
+
+    With ``r = x1/x0`` the mean is ``-ln x0 - ((1+d) ln(1+d) - d)/d``, ``d = r - 1``;
+    the bracket is evaluated by its series near ``d = 0``.
+    """
+    x0 = np.asarray(x0, dtype=np.float64)
+    x1 = np.asarray(x1, dtype=np.float64)
+    d = x1 / x0 - 1.0
+    small = np.abs(d) < 1e-4
+    d_safe = np.where(small, 1.0, d)
+    exact = ((1.0 + d_safe) * np.log1p(d_safe) - d_safe) / d_safe
+    series = d * (0.5 - d * (1.0 / 6.0 - d / 12.0))
+    return -np.log(x0) - np.where(small, series, exact)
+
+
+def piece_optical_depth(a0: Array, a1: Array, length: Array, unit_distance: float) -> Array:
+    """Optical depth of a piece of given length where opacity runs linearly a0 -> a1."""
+    x0 = 1.0 - np.clip(a0, 0.0, MAX_OPACITY)
+    x1 = 1.0 - np.clip(a1, 0.0, MAX_OPACITY)
+    return np.asarray(length) * mean_neg_log(x0, x1) / unit_distance
+
+
+def _theta_partial(x0: Array, x1: Array, frac: Array, length: Array, u: float) -> Array:
+    """Optical depth from the start of a piece to fraction ``frac`` of it."""
+    xf = x0 + (x1 - x0) * frac
+    return frac * length * mean_neg_log(x0, xf) / u
+
+
+def integrate_pieces(
+    c0: Array, c1: Array, a0: Array, a1: Array, length: Array, unit_distance: float
+) -> tuple[Array, Array]:
+    """Integrate pieces on which colour and opacity run linearly along the ray.
+
+    Parameters
+    ----------
+    c0, c1 : (n, 3) colour at the front and back of each piece.
+    a0, a1 : (n,) opacity at the front and back (clamped to MAX_OPACITY).
+    length : (n,) length of each piece in world units.
+    unit_distance : the transfer function's unit distance ``u``.
+
+    Returns
+    -------
+    rgb : (n, 3) premultiplied emitted colour of each piece, as seen from its front.
+    theta : (n,) optical depth of each piece; its alpha is ``1 - exp(-theta)``.
+
+    Notes
+    -----
+    The optical depth is exact. The colour uses ``I = c0 - c1 T(L) + c' int T``, with
+    ``int T`` by 6-point Gauss–Legendre on sub-pieces of optical depth <= 1/2 (those past
+    optical depth 40 are dropped: their weight is below 4e-18). For a smooth ``T`` the
+    quadrature error per sub-piece is below 1e-9 of its length; measured against 20k-step
+    midpoint quadrature the whole is within 1e-7 (``tests/test_optics.py``).
+    """
+    c0 = np.asarray(c0, dtype=np.float64)
+    c1 = np.asarray(c1, dtype=np.float64)
+    length = np.asarray(length, dtype=np.float64)
+    u = float(unit_distance)
+    x0 = 1.0 - np.clip(a0, 0.0, MAX_OPACITY)
+    x1 = 1.0 - np.clip(a1, 0.0, MAX_OPACITY)
+    theta = length * mean_neg_log(x0, x1) / u
+    n = length.shape[0]
+    if n == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+
+    # Sub-pieces: as many as the optical depth needs (capped where light is gone).
+    n_sub = np.clip(np.ceil(np.minimum(theta, _THETA_CUT) / _SUB_THETA), 1, _MAX_SUB).astype(np.int64)
+    piece = np.repeat(np.arange(n), n_sub)
+    start = np.cumsum(n_sub) - n_sub
+    k = np.arange(piece.shape[0]) - start[piece]
+    # Cut sub-pieces at equal optical depth when it is large, so each carries <= 1/2;
+    # positions of equal theta are found by bisection on the closed form.
+    f_lo = _frac_at_theta(x0[piece], x1[piece], length[piece], u, theta[piece], k / n_sub[piece])
+    f_hi = _frac_at_theta(x0[piece], x1[piece], length[piece], u, theta[piece], (k + 1) / n_sub[piece])
+    last = k == n_sub[piece] - 1
+    f_hi = np.where(last & (theta[piece] <= _THETA_CUT), 1.0, f_hi)
+
+    frac = f_lo[:, None] + (f_hi - f_lo)[:, None] * _GL_X[None, :]
+    t_vals = np.exp(-_theta_partial(x0[piece, None], x1[piece, None], frac, length[piece, None], u))
+    sub_int = (t_vals @ _GL_W) * (f_hi - f_lo) * length[piece]
+    int_t = np.bincount(piece, weights=sub_int, minlength=n)
+
+    t_end = np.exp(-theta)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = np.where(length[:, None] > 0, (c1 - c0) / length[:, None], 0.0)
+    rgb = c0 - c1 * t_end[:, None] + slope * int_t[:, None]
+    # Zero-length or transparent pieces emit nothing; guard rounding to tiny negatives.
+    return np.clip(rgb, 0.0, None), theta
+
+
+def _frac_at_theta(
+    x0: Array, x1: Array, length: Array, u: float, theta: Array, q: Array
+) -> Array:
+    """Fraction ``f`` of a piece where the optical depth reaches ``q * min(theta, cut)``.
+
+    Optical depth is monotone in ``f``; 40 bisection steps give ~1e-12 precision.
+    """
+    target = q * np.minimum(theta, _THETA_CUT)
+    lo = np.zeros_like(target)
+    hi = np.ones_like(target)
+    trivial = (q <= 0) | ((q >= 1) & (theta <= _THETA_CUT))
+    uniform = np.minimum(theta, _THETA_CUT) <= _SUB_THETA  # one sub-piece: no search needed
+    if np.all(trivial | uniform):
+        return np.where(q >= 1, 1.0, np.where(q <= 0, 0.0, q))
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        below = _theta_partial(x0, x1, mid, length, u) < target
+        lo = np.where(below, mid, lo)
+        hi = np.where(below, hi, mid)
+    f = 0.5 * (lo + hi)
+    return np.where(q <= 0, 0.0, np.where((q >= 1) & (theta <= _THETA_CUT), 1.0, f))

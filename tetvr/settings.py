@@ -1,0 +1,75 @@
+"""Method settings of the GPU renderer: one frozen value object, usable as a cache key."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Literal
+
+__all__ = ["RenderSettings", "SORT_METHODS", "TABLE_ENCODINGS", "TABLE_DTYPES"]
+
+#: Visibility orderings (see :mod:`tetvr.sort`).
+SORT_METHODS = ("centroid", "none")
+#: How the pre-integration table is stored and looked up (see :mod:`tetvr.preintegrate`).
+TABLE_ENCODINGS = ("normalized", "premultiplied")
+TABLE_DTYPES = ("float32", "uint8")
+
+
+@dataclasses.dataclass(frozen=True)
+class RenderSettings:
+    """How the projected-tetrahedra renderer trades speed for accuracy.
+
+    Parameters
+    ----------
+    sort : visibility order of the cells: ``"centroid"`` (back to front by centroid
+        distance) or ``"none"`` (input order; only for measurements).
+    table_scalar_bins : N, samples of the scalar axis of the pre-integration table.
+    table_thickness_slices : K, thickness slices on the logarithmic axis.
+    table_log_base : ratio between consecutive thickness slices.
+    table_dtype : ``"float32"`` or ``"uint8"`` storage of the table.
+    table_encoding : ``"normalized"`` stores colour/alpha and optical depth per unit
+        length, so that alpha is exact in the thickness and only the (slowly varying)
+        colour is interpolated across slices; ``"premultiplied"`` stores premultiplied
+        RGBA as in Kraus et al. 2004 and interpolates it linearly in log-thickness.
+    perspective_correct : interpolate front/back scalars and thickness
+        perspective-correctly (Kraus et al. 2004) rather than linearly in screen space.
+
+    Examples
+    --------
+    >>> RenderSettings(table_scalar_bins=128).table_scalar_bins
+    128
+    """
+
+    sort: Literal["centroid", "none"] = "centroid"
+    table_scalar_bins: int = 256
+    table_thickness_slices: int = 16
+    table_log_base: float = 2.0
+    table_dtype: Literal["float32", "uint8"] = "float32"
+    table_encoding: Literal["normalized", "premultiplied"] = "normalized"
+    perspective_correct: bool = True
+
+    def __post_init__(self) -> None:
+        if self.sort not in SORT_METHODS:
+            raise ValueError(f"sort must be one of {SORT_METHODS}, got {self.sort!r}")
+        if self.table_encoding not in TABLE_ENCODINGS:
+            raise ValueError(f"table_encoding must be one of {TABLE_ENCODINGS}, got {self.table_encoding!r}")
+        if self.table_dtype not in TABLE_DTYPES:
+            raise ValueError(f"table_dtype must be one of {TABLE_DTYPES}, got {self.table_dtype!r}")
+        for name, lo, hi in (("table_scalar_bins", 2, 2048), ("table_thickness_slices", 1, 256)):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or not lo <= v <= hi:
+                raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
+        if not (1.0 < float(self.table_log_base) <= 100.0):
+            raise ValueError(f"table_log_base must be in (1, 100], got {self.table_log_base!r}")
+        object.__setattr__(self, "table_log_base", float(self.table_log_base))
+        object.__setattr__(self, "perspective_correct", bool(self.perspective_correct))
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "RenderSettings":
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - names
+        if unknown:
+            raise ValueError(f"unknown settings keys {sorted(unknown)}; expected some of {sorted(names)}")
+        return cls(**data)
