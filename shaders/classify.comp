@@ -1,0 +1,126 @@
+#version 430
+// classify.comp -- per-tet projective classification (Shirley & Tuchman 1990), computed on
+// the GPU on every view change as in IPTINT (Marroquim et al. 2008).
+//
+// In:  Points, Tets (common.glsl), u_view, u_proj, u_perspective, u_offset, u_count.
+// Out: Fans[tet]: the silhouette polygon (3 or 4 vertices, cyclic) and the thick vertex,
+//      i.e. the front and back points (eye space) and scalars of the ray through it.
+//      Class 1: one vertex projects inside the triangle of the other three; it is the thick
+//      vertex and the ray through it leaves by the opposite face. Class 2: two opposite
+//      edges cross in projection; the thick vertex is the crossing, on both edges.
+// All 3D points on the ray are found with perspective-correct weights, so the front and
+// back points and their scalars are exact.
+
+#include "common.glsl"
+
+layout(local_size_x = 64) in;
+layout(std430, binding = 2) writeonly buffer Fans { TetFan fans[]; };
+
+uniform int u_offset;
+uniform int u_count;
+
+float cross2(vec2 a, vec2 b) { return a.x * b.y - a.y * b.x; }
+
+void main() {
+    int t = int(gl_GlobalInvocationID.x) + u_offset;
+    if (t >= u_count) return;
+    ivec4 id = tets[t];
+    vec3 p_eye[4];
+    vec2 p_ndc[4];
+    float w[4];
+    float s[4];
+    bool behind = false;
+    for (int k = 0; k < 4; ++k) {
+        vec4 p = points[id[k]];
+        p_eye[k] = (u_view * vec4(p.xyz, 1.0)).xyz;
+        vec4 clip = u_proj * vec4(p_eye[k], 1.0);
+        w[k] = clip.w;
+        behind = behind || clip.w <= 0.0;
+        p_ndc[k] = clip.xy / clip.w;
+        s[k] = p.w;
+    }
+    TetFan fan;
+    if (behind) {
+        fan.ids = ivec4(-1);
+        fan.front = vec4(0.0);
+        fan.back = vec4(0.0);
+        fans[t] = fan;
+        return;
+    }
+
+    // Class 1: the vertex lying most inside the triangle of the other three.
+    int best = 0;
+    float best_score = -1e30;
+    vec3 best_bary = vec3(0.0);
+    for (int k = 0; k < 4; ++k) {
+        int a = (k + 1) & 3, b = (k + 2) & 3, c = (k + 3) & 3;
+        float area = cross2(p_ndc[b] - p_ndc[a], p_ndc[c] - p_ndc[a]);
+        vec3 bary;
+        if (abs(area) < 1e-30) {
+            bary = vec3(-1.0);
+        } else {
+            bary.x = cross2(p_ndc[b] - p_ndc[k], p_ndc[c] - p_ndc[k]) / area;
+            bary.y = cross2(p_ndc[c] - p_ndc[k], p_ndc[a] - p_ndc[k]) / area;
+            bary.z = 1.0 - bary.x - bary.y;
+        }
+        float score = min(bary.x, min(bary.y, bary.z));
+        if (score > best_score) { best_score = score; best = k; best_bary = bary; }
+    }
+
+    // Class 2: the pair of opposite edges whose projections cross most clearly.
+    const ivec4 pairs[3] = ivec4[3](ivec4(0, 1, 2, 3), ivec4(0, 2, 1, 3), ivec4(0, 3, 1, 2));
+    int best_pair = 0;
+    float pair_score = -1e30;
+    vec2 pair_param = vec2(0.5);
+    for (int q = 0; q < 3; ++q) {
+        ivec4 e = pairs[q];
+        vec2 r = p_ndc[e.y] - p_ndc[e.x];
+        vec2 d = p_ndc[e.w] - p_ndc[e.z];
+        float den = cross2(r, d);
+        if (abs(den) < 1e-30) continue;
+        vec2 ac = p_ndc[e.z] - p_ndc[e.x];
+        float ta = cross2(ac, d) / den;  // screen parameter on edge x->y
+        float tc = cross2(ac, r) / den;  // screen parameter on edge z->w
+        float score = min(min(ta, 1.0 - ta), min(tc, 1.0 - tc));
+        if (score > pair_score) { pair_score = score; best_pair = q; pair_param = vec2(ta, tc); }
+    }
+
+    vec3 p0, p1;
+    float s0, s1;
+    if (best_score >= 0.0 || best_score >= pair_score) {
+        // Class 1 (also the fallback for degenerate projections).
+        int k = best;
+        int a = (k + 1) & 3, b = (k + 2) & 3, c = (k + 3) & 3;
+        vec3 bary = clamp(best_bary, 0.0, 1.0);
+        bary /= max(bary.x + bary.y + bary.z, 1e-30);
+        // Perspective-correct: screen-space weights divided by w, renormalised.
+        vec3 pw = bary / vec3(w[a], w[b], w[c]);
+        pw /= (pw.x + pw.y + pw.z);
+        p0 = p_eye[k];
+        s0 = s[k];
+        p1 = pw.x * p_eye[a] + pw.y * p_eye[b] + pw.z * p_eye[c];
+        s1 = pw.x * s[a] + pw.y * s[b] + pw.z * s[c];
+        fan.ids = ivec4(id[a], id[b], id[c], -1);
+    } else {
+        ivec4 e = pairs[best_pair];
+        vec2 ts = clamp(pair_param, 0.0, 1.0);
+        // Screen parameter -> parameter along the 3D edge.
+        float ua = ts.x * w[e.x] / ((1.0 - ts.x) * w[e.y] + ts.x * w[e.x]);
+        float uc = ts.y * w[e.z] / ((1.0 - ts.y) * w[e.w] + ts.y * w[e.z]);
+        p0 = mix(p_eye[e.x], p_eye[e.y], ua);
+        s0 = mix(s[e.x], s[e.y], ua);
+        p1 = mix(p_eye[e.z], p_eye[e.w], uc);
+        s1 = mix(s[e.z], s[e.w], uc);
+        // Silhouette in cyclic order: x, z, y, w (the crossing edges are its diagonals).
+        fan.ids = ivec4(id[e.x], id[e.z], id[e.y], id[e.w]);
+    }
+    // The nearer point (larger eye z) is the front.
+    if (p0.z >= p1.z) {
+        fan.front = vec4(p0, s0);
+        fan.back = vec4(p1, s1);
+    } else {
+        fan.front = vec4(p1, s1);
+        fan.back = vec4(p0, s0);
+    }
+    fans[t] = fan;
+}

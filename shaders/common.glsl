@@ -1,0 +1,25 @@
+// common.glsl -- shared declarations for the projected-tetrahedra pipeline.
+//
+// Coordinate spaces: *_obj  mesh coordinates relative to the mesh centre (float32-safe),
+//                    *_eye  camera at the origin looking down -z (world units, rigid),
+//                    *_ndc  normalized device coordinates.
+// Mesh buffers (uploaded once per mesh):
+//   binding 0  Points  vec4(xyz_obj, scalar)
+//   binding 1  Tets    ivec4 vertex ids
+// Per view (written by classify.comp, read by tet.vert):
+//   binding 2  Fans    one TetFan per tet
+//   binding 3  Order   uint tet ids, back to front
+
+struct TetFan {
+    ivec4 ids;     // silhouette vertices in cyclic order; ids.w < 0 for a 3-vertex silhouette;
+                   // ids.x < 0: the tet is not drawn (a vertex lies behind the eye)
+    vec4 front;    // thick vertex, front point: xyz_eye, scalar
+    vec4 back;     // thick vertex, back point:  xyz_eye, scalar
+};
+
+layout(std430, binding = 0) readonly buffer Points { vec4 points[]; };
+layout(std430, binding = 1) readonly buffer Tets { ivec4 tets[]; };
+
+uniform mat4 u_view;        // obj -> eye
+uniform mat4 u_proj;        // eye -> clip
+uniform int u_perspective;  // 1: perspective projection, 0: parallel

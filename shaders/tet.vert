@@ -1,0 +1,58 @@
+#version 430
+// tet.vert -- expands each tet's fan into 4 triangles (12 vertices, pulled by gl_VertexID;
+// no vertex attributes). Triangle i is (thick vertex, silhouette[i], silhouette[i+1]);
+// a 3-vertex silhouette leaves the 4th triangle degenerate.
+//
+// In:  Fans, Order (back-to-front tet ids), Points, u_view, u_proj, u_perspective.
+// Out: noperspective v_front = (p_front_eye, 1) / w_f, v_back = (p_back_eye, 1) / w_b,
+//      v_scalar = (s_front / w_f, s_back / w_b): divided by the eye depth w in perspective
+//      so that a linear interpolation in screen space followed by a division by the
+//      interpolated 1/w is perspective-correct (Kraus et al. 2004). With
+//      PERSPECTIVE_CORRECT 0, w = 1 and the interpolation is screen-linear.
+
+#include "common.glsl"
+
+layout(std430, binding = 2) readonly buffer Fans { TetFan fans[]; };
+layout(std430, binding = 3) readonly buffer Order { uint order[]; };
+
+noperspective out vec4 v_front;
+noperspective out vec4 v_back;
+noperspective out vec2 v_scalar;
+
+void main() {
+    uint tet = order[gl_VertexID / 12];
+    int corner = gl_VertexID % 12;
+    int tri = corner / 3;
+    int k = corner % 3;
+    TetFan fan = fans[tet];
+    int count = fan.ids.w < 0 ? 3 : 4;
+    if (fan.ids.x < 0 || tri >= count) {
+        // Not drawn: every corner at one point outside the view gives no fragments.
+        gl_Position = vec4(2.0, 2.0, 0.0, 1.0);
+        v_front = vec4(0.0); v_back = vec4(0.0); v_scalar = vec2(0.0);
+        return;
+    }
+    vec3 front_eye, back_eye;
+    float sf, sb;
+    if (k == 0) {
+        front_eye = fan.front.xyz; sf = fan.front.w;
+        back_eye = fan.back.xyz;   sb = fan.back.w;
+    } else {
+        int v = fan.ids[(tri + k - 1) % count];
+        vec4 p = points[v];
+        front_eye = (u_view * vec4(p.xyz, 1.0)).xyz;
+        back_eye = front_eye;
+        sf = p.w; sb = p.w;
+    }
+    vec4 clip = u_proj * vec4(front_eye, 1.0);
+    gl_Position = vec4(clip.xy / clip.w, 0.0, 1.0);
+#if PERSPECTIVE_CORRECT
+    float wf = u_perspective == 1 ? -front_eye.z : 1.0;
+    float wb = u_perspective == 1 ? -back_eye.z : 1.0;
+#else
+    float wf = 1.0, wb = 1.0;
+#endif
+    v_front = vec4(front_eye, 1.0) / wf;
+    v_back = vec4(back_eye, 1.0) / wb;
+    v_scalar = vec2(sf / wf, sb / wb);
+}

@@ -1,0 +1,16 @@
+"""The OpenGL side of tetvr: the only package that imports moderngl (lazily).
+
+:class:`Renderer` owns an EGL context and every GL object made in it.
+"""
+
+from .context import GLUnavailableError
+
+__all__ = ["GLUnavailableError", "Renderer"]
+
+
+def __getattr__(name: str):  # deferred so that `import tetvr.gl` stays cheap
+    if name == "Renderer":
+        from .renderer import Renderer
+
+        return Renderer
+    raise AttributeError(name)

@@ -1,0 +1,318 @@
+"""The GPU projected-tetrahedra renderer: one object owns the context and all GL objects.
+
+Per mesh (once): points and tets go to shader storage buffers. Per transfer function
+(once): the pre-integration table goes to a 3D texture. Per view: ``classify.comp``
+writes every tet's fan, the CPU sorts the cells and uploads the order, one draw call
+expands the fans into triangles (``tet.vert``) whose fragments look up the table
+(``tet.frag``) and blend back to front into an RGBA32F target, which is read back.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..camera import Camera
+from ..mesh import TetMesh
+from ..preintegrate import PreintegrationTable, table_for
+from ..settings import RenderSettings
+from ..sort import visibility_order
+from ..transfer import TransferFunction
+from .context import create_context, describe
+from .shaders import ShaderCompileError, assemble, explain
+
+__all__ = ["Renderer", "FrameStats"]
+
+_FAN_BYTES = 48  # sizeof(TetFan) in std430
+_GROUP = 64  # classify.comp local size
+_MAX_GROUPS = 65535
+
+
+@dataclasses.dataclass(frozen=True)
+class FrameStats:
+    """Counts and stage times (seconds) of the last frame; times need ``profile=True``."""
+
+    n_tets: int = 0
+    size: tuple[int, int] = (0, 0)
+    upload: float = 0.0
+    classify: float = 0.0
+    sort: float = 0.0
+    order_upload: float = 0.0
+    table: float = 0.0
+    draw: float = 0.0
+    readback: float = 0.0
+
+    @property
+    def total(self) -> float:
+        return self.upload + self.classify + self.sort + self.order_upload + self.table + self.draw + self.readback
+
+
+class Renderer:
+    """Renders tetrahedral meshes on the GPU; reuse one for many frames.
+
+    Parameters
+    ----------
+    settings : method settings (table size, sort, interpolation).
+    profile : wait for the GPU after each stage so :attr:`last_stats` holds stage times.
+
+    Examples
+    --------
+    >>> with Renderer() as r:                                  # doctest: +SKIP
+    ...     image = r.render(mesh, camera, tf, size=(256, 256))
+    """
+
+    def __init__(self, settings: RenderSettings | None = None, *, profile: bool = False) -> None:
+        self.settings = settings or RenderSettings()
+        self.profile = profile
+        self.ctx: Any = create_context()
+        self.gl_info = describe(self.ctx)
+        self._programs: dict[tuple[str, ...], Any] = {}
+        self._mesh: TetMesh | None = None
+        self._mesh_buffers: list[Any] = []
+        self._centre = np.zeros(3)
+        self._fans: Any = None
+        self._order: Any = None
+        self._table: PreintegrationTable | None = None
+        self._table_tex: Any = None
+        self._fbo: Any = None
+        self._fbo_tex: Any = None
+        self._fbo_size: tuple[int, int] = (0, 0)
+        self._vaos: dict[int, Any] = {}
+        self.last_stats = FrameStats()
+        self._released = False
+
+    # ---- lifetime ----
+    def __enter__(self) -> "Renderer":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+    def release(self) -> None:
+        """Release every GL object and the context. Safe to call twice."""
+        if self._released:
+            return
+        for obj in self._gl_objects():
+            obj.release()
+        self._programs.clear()
+        self._vaos.clear()
+        self._mesh_buffers = []
+        self._fans = self._order = self._table_tex = self._fbo = self._fbo_tex = None
+        self._mesh = None
+        self._table = None
+        self.ctx.release()
+        self._released = True
+
+    def _gl_objects(self) -> list[Any]:
+        objs = [*self._vaos.values(), *self._programs.values(), *self._mesh_buffers]
+        objs += [o for o in (self._fans, self._order, self._table_tex, self._fbo, self._fbo_tex) if o is not None]
+        return objs
+
+    # ---- programs ----
+    def _program(self, kind: str, **defines: int) -> Any:
+        key = (kind, *(f"{k}={v}" for k, v in sorted(defines.items())))
+        prog = self._programs.get(key)
+        if prog is not None:
+            return prog
+        stages = {"classify": {"compute_shader": "classify.comp"},
+                  "tet": {"vertex_shader": "tet.vert", "fragment_shader": "tet.frag"},
+                  "floor": {"vertex_shader": "tet.vert", "fragment_shader": "floor.frag"}}[kind]
+        sources: dict[str, str] = {}
+        all_files: list[str] = []
+        try:
+            for stage, name in stages.items():
+                src, files = assemble(name, defines)
+                sources[stage] = src
+                all_files = files
+                if stage == "compute_shader":
+                    prog = self.ctx.compute_shader(src)
+            if prog is None:
+                prog = self.ctx.program(**sources)
+        except Exception as exc:
+            if isinstance(exc, ShaderCompileError):
+                raise
+            raise ShaderCompileError(f"{kind} ({', '.join(stages.values())}): {explain(exc, all_files)}") from exc
+        self._programs[key] = prog
+        return prog
+
+    # ---- per-mesh, per-table, per-size state ----
+    def _use_mesh(self, mesh: TetMesh) -> None:
+        if mesh is self._mesh:
+            return
+        for b in self._mesh_buffers:
+            b.release()
+        for b in (self._fans, self._order):
+            if b is not None:
+                b.release()
+        # Coordinates relative to the mesh centre keep float32 precise far from the origin.
+        self._centre = mesh.bounds.mean(axis=0)
+        pts = np.empty((mesh.n_points, 4), dtype=np.float32)
+        pts[:, :3] = mesh.points - self._centre
+        pts[:, 3] = mesh.scalars
+        points = self.ctx.buffer(pts.tobytes())
+        tets = self.ctx.buffer(np.ascontiguousarray(mesh.tets, dtype=np.int32).tobytes())
+        self._mesh_buffers = [points, tets]
+        self._fans = self.ctx.buffer(reserve=max(mesh.n_tets, 1) * _FAN_BYTES)
+        self._order = self.ctx.buffer(reserve=max(mesh.n_tets, 1) * 4)
+        self._mesh = mesh
+
+    def _use_table(self, table: PreintegrationTable) -> None:
+        if table is self._table:
+            return
+        if self._table_tex is not None:
+            self._table_tex.release()
+        k1, n, _, _ = table.data.shape
+        dtype = "f4" if table.data.dtype == np.float32 else "f1"
+        tex = self.ctx.texture3d((n, n, k1), 4, np.ascontiguousarray(table.data).tobytes(), dtype=dtype)
+        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+        import moderngl
+
+        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self._table_tex = tex
+        self._table = table
+
+    def _use_target(self, size: tuple[int, int]) -> None:
+        if self._fbo is not None and self._fbo_size == size:
+            return
+        for o in (self._fbo, self._fbo_tex):
+            if o is not None:
+                o.release()
+        self._fbo_tex = self.ctx.texture(size, 4, dtype="f4")
+        self._fbo = self.ctx.framebuffer(color_attachments=[self._fbo_tex])
+        self._fbo_size = size
+
+    # ---- the frame ----
+    def table(self, mesh: TetMesh, tf: TransferFunction) -> PreintegrationTable:
+        """The pre-integration table this renderer uses for a mesh and transfer function."""
+        s = self.settings
+        return table_for(tf, mesh.scalar_range, mesh.max_edge, n_bins=s.table_scalar_bins,
+                         n_slices=s.table_thickness_slices, log_base=s.table_log_base,
+                         encoding=s.table_encoding, dtype=s.table_dtype)
+
+    def render(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, *, size: tuple[int, int] = (512, 512),
+               order: NDArray[np.integer[Any]] | None = None, shader: str = "tet") -> NDArray[np.float32]:
+        """Render one frame.
+
+        Parameters
+        ----------
+        mesh, camera, tf : the scene.
+        size : (width, height) in pixels.
+        order : an explicit drawing order (cell ids, back to front) instead of the sort.
+        shader : "tet" (the real thing) or "floor" (constant colour; fill-rate floor).
+
+        Returns
+        -------
+        (height, width, 4) float32 premultiplied RGBA, row 0 at the top.
+        """
+        if self._released:
+            raise RuntimeError("this Renderer has been released")
+        width, height = _check_size(size, self.ctx)
+        s = self.settings
+        clock = _Clock(self.ctx, self.profile)
+
+        self._use_mesh(mesh)
+        clock.lap("upload")
+        table = self.table(mesh, tf)
+        self._use_table(table)
+        clock.lap("table")
+
+        view = camera.view_matrix()
+        view[:3, 3] += view[:3, :3] @ self._centre  # the buffers hold points minus the centre
+        proj = camera.projection_matrix(width / height)
+        persp = 0 if camera.parallel_projection else 1
+
+        classify = self._program("classify")
+        _set(classify, u_view=view, u_proj=proj, u_perspective=persp, u_count=mesh.n_tets)
+        self._mesh_buffers[0].bind_to_storage_buffer(0)
+        self._mesh_buffers[1].bind_to_storage_buffer(1)
+        self._fans.bind_to_storage_buffer(2)
+        groups = (mesh.n_tets + _GROUP - 1) // _GROUP
+        for first in range(0, groups, _MAX_GROUPS):
+            _set(classify, u_offset=first * _GROUP)
+            classify.run(min(_MAX_GROUPS, groups - first))
+        clock.lap("classify")
+
+        if order is None:
+            order_ids = visibility_order(mesh, camera, s.sort)
+        else:
+            order_ids = np.asarray(order)
+            if order_ids.shape != (mesh.n_tets,):
+                raise ValueError(f"order must list all {mesh.n_tets} cells once, got shape {order_ids.shape}")
+        clock.lap("sort")
+        self._order.write(np.ascontiguousarray(order_ids, dtype=np.uint32).tobytes())
+        clock.lap("order_upload")
+
+        prog = self._program(shader, PERSPECTIVE_CORRECT=int(s.perspective_correct),
+                             TABLE_NORMALIZED=int(table.encoding == "normalized"))
+        near, far = camera.clipping_range
+        _set(prog, u_view=view, u_proj=proj, u_perspective=persp, u_near=near, u_far=far, u_scalar_range=table.scalar_range, u_d_min=table.d_min,
+             u_inv_log_base=1.0 / np.log(table.log_base), u_alpha_scale=table.alpha_scale,
+             u_table_size=(table.n_bins, table.n_bins, table.n_slices + 1), u_table=0)
+        self._use_target((width, height))
+        self._fbo.use()
+        self._fbo.clear(0.0, 0.0, 0.0, 0.0)
+        self.ctx.memory_barrier()
+        self._table_tex.use(0)
+        self._fans.bind_to_storage_buffer(2)
+        self._order.bind_to_storage_buffer(3)
+        import moderngl
+
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        self.ctx.enable(moderngl.BLEND)
+        self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
+        self.ctx.blend_equation = moderngl.FUNC_ADD
+        vao = self._vaos.get(id(prog))
+        if vao is None:
+            vao = self._vaos[id(prog)] = self.ctx.vertex_array(prog, [])
+        vao.render(moderngl.TRIANGLES, vertices=12 * mesh.n_tets)
+        self.ctx.disable(moderngl.BLEND)
+        clock.lap("draw")
+        raw = self._fbo.read(components=4, dtype="f4")
+        image = np.frombuffer(raw, dtype=np.float32).reshape(height, width, 4)[::-1].copy()
+        clock.lap("readback")
+        err = self.ctx.error
+        if err != "GL_NO_ERROR":
+            raise RuntimeError(f"OpenGL error after rendering: {err}")
+        self.last_stats = FrameStats(n_tets=mesh.n_tets, size=(width, height), **clock.laps)
+        return image
+
+
+def _check_size(size: tuple[int, int], ctx: Any) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in size)
+    except (TypeError, ValueError):
+        raise ValueError(f"size must be (width, height), got {size!r}") from None
+    if (width, height) != tuple(size):
+        raise ValueError(f"size must be integers, got {size!r}")
+    limit = int(min(ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384), ctx.info.get("GL_MAX_VIEWPORT_DIMS", (16384,))[0]))
+    if not (1 <= width <= limit and 1 <= height <= limit):
+        raise ValueError(f"image size {size!r} is outside 1..{limit} pixels per side (the GL limit here)")
+    return width, height
+
+
+def _set(prog: Any, **uniforms: Any) -> None:
+    for name, value in uniforms.items():
+        if name not in prog:
+            continue  # optimised away by the compiler
+        if isinstance(value, np.ndarray) and value.shape == (4, 4):
+            prog[name].write(value.T.astype(np.float32).tobytes())  # GLSL is column-major
+        else:
+            prog[name].value = value
+
+
+class _Clock:
+    def __init__(self, ctx: Any, sync: bool) -> None:
+        self.ctx, self.sync = ctx, sync
+        self.laps: dict[str, float] = {}
+        self.t = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        if self.sync:
+            self.ctx.finish()
+        now = time.perf_counter()
+        self.laps[name] = self.laps.get(name, 0.0) + now - self.t
+        self.t = now

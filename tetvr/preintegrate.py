@@ -1,0 +1,314 @@
+"""The 3D pre-integration table: (front scalar, back scalar, thickness) -> RGBA.
+
+About this technique
+--------------------
+Pre-integration (Engel, Kraus & Ertl 2001) tabulates the emission–absorption integral
+of a ray segment whose scalar runs linearly from ``sf`` to ``sb`` over a length ``d``.
+Kraus, Qiao & Ebert (2004) put the thickness on a *logarithmic* axis, so that the thin
+segments that dominate a fine mesh are sampled as well as the thick ones: slice ``k`` of
+``K`` holds thickness ``d_k = d_max * base**(k - K + 1)``, and an extra slice 0 holds
+thickness zero, so that segments thinner than ``d_0`` interpolate linearly to zero
+(as in Holeček's thesis).
+
+Building one slice costs O(N^2) (Lum, Wilson & Ma 2004 made the table incremental). We
+use an exact incremental scheme: along each diagonal ``sb - sf = n`` of a slice, every
+entry is a run of ``n`` scalar bins, each crossed in length ``d/n``, and the entry for
+``sf = i`` follows from the entry for ``i + 1`` by compositing bin ``i`` in front and
+removing bin ``i + n`` from the back::
+
+    W_i = c_i + t_i * (W_{i+1} - T(i+1 .. i+n-1) * c_{i+n})
+
+where ``c_m``/``t_m`` are the premultiplied colour and transmittance of bin ``m`` and
+``T`` the transmittance between, from prefix sums of optical depth. Every step multiplies
+earlier rounding by ``t_i <= 1``, so the recurrence is stable. The optical depth of an
+entry is exact from a prefix sum (Engel 2001). The only approximation is inside one bin,
+where the transfer function is taken as linear between the table's nodes and the
+extinction as its exact bin mean; with 256 bins this is below 1e-4 (``tests``).
+
+Encodings
+---------
+``premultiplied``
+    RGBA as in Kraus et al. The GPU interpolates it linearly in log-thickness, which
+    errs by up to ~6 % of alpha between slices with base 2 (alpha ~ tau*d is convex in
+    log d).
+``normalized`` (default)
+    RGB holds the colour per unit alpha, ``C / alpha``, and A the mean extinction
+    ``Theta / d``. Alpha is then exact in ``d`` (``1 - exp(-d A)``) and only the colour,
+    which varies slowly with thickness, is interpolated across slices. Slice 0 holds
+    the thin limit ``int c tau / int tau``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .optics import MAX_OPACITY, mean_neg_log
+from .transfer import TransferFunction
+
+__all__ = ["PreintegrationTable", "build_table", "table_for"]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PreintegrationTable:
+    """A built table and how to index it.
+
+    Attributes
+    ----------
+    data : (K+1, N, N, 4) float32 or uint8; axes (thickness slice, sb, sf, RGBA), the
+        layout of an OpenGL 3D texture of width sf, height sb and depth thickness.
+    scalar_range : scalars at the first and last node of both scalar axes.
+    thicknesses : (K+1,) thickness of each slice (slice 0 is 0).
+    log_base : ratio between slices 1..K.
+    encoding : "normalized" or "premultiplied".
+    alpha_scale : for "normalized", the factor that turns the stored A into extinction
+        (1 for float32; max extinction for uint8, whose A is stored divided by it).
+    """
+
+    data: NDArray[np.generic]
+    scalar_range: tuple[float, float]
+    thicknesses: NDArray[np.float64]
+    log_base: float
+    encoding: str
+    alpha_scale: float = 1.0
+
+    @property
+    def n_bins(self) -> int:
+        return int(self.data.shape[1])
+
+    @property
+    def n_slices(self) -> int:
+        """K, the number of non-zero thickness slices."""
+        return int(self.data.shape[0]) - 1
+
+    @property
+    def d_min(self) -> float:
+        return float(self.thicknesses[1])
+
+    @property
+    def d_max(self) -> float:
+        return float(self.thicknesses[-1])
+
+    def slice_coordinate(self, thickness: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Fractional slice index of a thickness (the GPU does the same in GLSL)."""
+        d = np.asarray(thickness, dtype=np.float64)
+        with np.errstate(divide="ignore"):
+            log_w = 1.0 + np.log(np.maximum(d, 1e-300) / self.d_min) / math.log(self.log_base)
+        w = np.where(d < self.d_min, d / self.d_min, log_w)
+        return np.clip(w, 0.0, float(self.n_slices))
+
+    def lookup(self, sf: NDArray[np.float64], sb: NDArray[np.float64], thickness: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Premultiplied RGBA of segments, by trilinear interpolation as the GPU does it.
+
+        A CPU model of the shader's lookup, used in tests to separate table error from
+        rasterisation error.
+        """
+        lo, hi = self.scalar_range
+        n = self.n_bins
+        fi = np.clip((np.asarray(sf) - lo) / (hi - lo), 0, 1) * (n - 1)
+        fj = np.clip((np.asarray(sb) - lo) / (hi - lo), 0, 1) * (n - 1)
+        fk = self.slice_coordinate(thickness)
+        data = self.data.astype(np.float64)
+        if self.data.dtype == np.uint8:
+            data /= 255.0
+        out = np.zeros(fi.shape + (4,))
+        i0 = np.minimum(np.floor(fi).astype(int), n - 2)
+        j0 = np.minimum(np.floor(fj).astype(int), n - 2)
+        k0 = np.minimum(np.floor(fk).astype(int), max(self.n_slices - 1, 0))
+        wi, wj, wk = fi - i0, fj - j0, fk - k0
+        for dk, wk_ in ((0, 1 - wk), (1, wk)):
+            for dj, wj_ in ((0, 1 - wj), (1, wj)):
+                for di, wi_ in ((0, 1 - wi), (1, wi)):
+                    out += (wk_ * wj_ * wi_)[..., None] * data[np.minimum(k0 + dk, self.n_slices), j0 + dj, i0 + di]
+        d = np.asarray(thickness, dtype=np.float64)
+        if self.encoding == "normalized":
+            alpha = -np.expm1(-d * out[..., 3] * self.alpha_scale)
+            return np.concatenate([out[..., :3] * alpha[..., None], alpha[..., None]], axis=-1)
+        return out
+
+
+def table_for(
+    tf: TransferFunction,
+    data_range: tuple[float, float],
+    d_max: float,
+    *,
+    n_bins: int = 256,
+    n_slices: int = 16,
+    log_base: float = 2.0,
+    encoding: str = "normalized",
+    dtype: str = "float32",
+) -> PreintegrationTable:
+    """The table for a transfer function and a mesh, from a cache keyed by all inputs.
+
+    The scalar axis spans the union of the data range and the transfer function's
+    domain, so no segment is clamped at the table's edge (clamping a scalar that crosses
+    the edge would bend the linear ramp the table assumes).
+    """
+    lo = min(float(data_range[0]), tf.domain[0])
+    hi = max(float(data_range[1]), tf.domain[1])
+    if hi <= lo:
+        pad = max(abs(lo) * 1e-6, 1e-12)
+        lo, hi = lo - pad, hi + pad
+    # Thicknesses are rounded up to 7 significant digits so near-equal meshes share a table.
+    d_top = float(f"{d_max * (1 + 1e-6):.7g}")
+    return _cached(tf, (lo, hi), d_top, n_bins, n_slices, float(log_base), encoding, dtype)
+
+
+@functools.lru_cache(maxsize=8)
+def _cached(tf: TransferFunction, scalar_range: tuple[float, float], d_max: float, n_bins: int,
+            n_slices: int, log_base: float, encoding: str, dtype: str) -> PreintegrationTable:
+    return build_table(tf, scalar_range, d_max, n_bins=n_bins, n_slices=n_slices, log_base=log_base,
+                       encoding=encoding, dtype=dtype)
+
+
+def build_table(
+    tf: TransferFunction,
+    scalar_range: tuple[float, float],
+    d_max: float,
+    *,
+    n_bins: int = 256,
+    n_slices: int = 16,
+    log_base: float = 2.0,
+    encoding: str = "normalized",
+    dtype: str = "float32",
+) -> PreintegrationTable:
+    """Build a pre-integration table (no cache; see :func:`table_for`).
+
+    Parameters
+    ----------
+    tf : the transfer function.
+    scalar_range : scalars of the first and last node.
+    d_max : thickness of the last slice; must be at least the thickest segment.
+    n_bins : N nodes on each scalar axis.
+    n_slices : K non-zero thickness slices, ``d_max * log_base**(k - K + 1)``.
+    encoding : "normalized" or "premultiplied" (see the module notes).
+    dtype : "float32" or "uint8".
+
+    Examples
+    --------
+    >>> tf = TransferFunction.preset("grayscale", (0, 1), opacity=0.5)
+    >>> build_table(tf, (0, 1), 1.0, n_bins=16, n_slices=4).data.shape
+    (5, 16, 16, 4)
+    """
+    lo, hi = float(scalar_range[0]), float(scalar_range[1])
+    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+        raise ValueError(f"scalar_range must be finite with lo < hi, got {scalar_range!r}")
+    if not (math.isfinite(d_max) and d_max > 0):
+        raise ValueError(f"d_max must be positive and finite, got {d_max!r}")
+    if n_bins < 2 or n_slices < 1:
+        raise ValueError(f"need n_bins >= 2 and n_slices >= 1, got {n_bins}, {n_slices}")
+    if encoding not in ("normalized", "premultiplied"):
+        raise ValueError(f"encoding must be 'normalized' or 'premultiplied', got {encoding!r}")
+    if dtype not in ("float32", "uint8"):
+        raise ValueError(f"dtype must be 'float32' or 'uint8', got {dtype!r}")
+
+    u = tf.unit_distance
+    nodes = np.linspace(lo, hi, n_bins)
+    ds = (hi - lo) / (n_bins - 1)
+    color, opacity = tf.evaluate(nodes)
+    x = 1.0 - np.clip(opacity, 0.0, MAX_OPACITY)
+    tau_node = -np.log(x) / u
+    tau_bin = mean_neg_log(x[:-1], x[1:]) / u  # exact mean extinction over each bin
+    thick = d_max * log_base ** (np.arange(n_slices) - n_slices + 1.0)
+
+    rgb = np.zeros((n_slices, n_bins, n_bins, 3))  # [k, sb, sf]
+    theta = np.zeros((n_slices, n_bins, n_bins))
+    # Optical depth is exact from the prefix sum of the bin means (Engel 2001).
+    prefix = np.concatenate([[0.0], np.cumsum(tau_bin)])  # sum of tau over bins < i
+    i_idx = np.arange(n_bins)
+    span = np.abs(i_idx[None, :] - i_idx[:, None])  # [sb, sf]
+    mean_tau = np.where(span > 0, np.abs(prefix[None, :] - prefix[:, None]) / np.maximum(span, 1), tau_node[None, :])
+    mean_tau = mean_tau.T  # now indexed [sb, sf]: prefix difference is symmetric, diagonal by sf
+    mean_tau[i_idx, i_idx] = tau_node
+    theta[:] = thick[:, None, None] * mean_tau[None]
+
+    # Diagonal: constant scalar, closed form.
+    rgb[:, i_idx, i_idx, :] = color[None] * (-np.expm1(-thick[:, None] * tau_node[None]))[..., None]
+    # Off-diagonal: the incremental recurrence, forwards (sb > sf) and on the mirrored axis.
+    fwd = _diagonal_runs(color, tau_bin, thick)  # [k, n, i] -> entry (sf=i, sb=i+n)
+    bwd = _diagonal_runs(color[::-1], tau_bin[::-1], thick)  # mirrored: sf=N-1-i, sb=N-1-i-n
+    for n in range(1, n_bins):
+        i = np.arange(n_bins - n)
+        rgb[:, i + n, i, :] = fwd[:, n, : n_bins - n]
+        rgb[:, n_bins - 1 - i - n, n_bins - 1 - i, :] = bwd[:, n, : n_bins - n]
+    alpha = -np.expm1(-theta)
+
+    table = np.zeros((n_slices + 1, n_bins, n_bins, 4))
+    alpha_scale = 1.0
+    if encoding == "premultiplied":
+        table[1:, ..., :3] = rgb
+        table[1:, ..., 3] = alpha
+    else:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            chroma = np.where(alpha[..., None] > 1e-300, rgb / alpha[..., None], 0.0)
+        table[1:, ..., :3] = np.clip(chroma, 0.0, 1.0)
+        table[:, ..., 3] = mean_tau[None]
+        table[0, ..., :3] = _thin_limit(color, tau_bin, tau_node)
+        if dtype == "uint8":
+            alpha_scale = float(max(mean_tau.max(), 1e-300))
+            table[..., 3] /= alpha_scale
+    if dtype == "uint8":
+        data: NDArray[np.generic] = np.round(np.clip(table, 0.0, 1.0) * 255.0).astype(np.uint8)
+    else:
+        data = table.astype(np.float32)
+    data.setflags(write=False)
+    thicknesses = np.concatenate([[0.0], thick])
+    return PreintegrationTable(data=data, scalar_range=(lo, hi), thicknesses=thicknesses,
+                               log_base=float(log_base), encoding=encoding, alpha_scale=alpha_scale)
+
+
+def _diagonal_runs(color: NDArray[np.float64], tau_bin: NDArray[np.float64], thick: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Premultiplied colour of every run of bins, for every slice: out[k, n, i] is the run
+    of n bins starting at node i, crossed front to back in total length thick[k].
+
+    Runs of the same n share one step length d/n, so each diagonal is a sliding window,
+    filled from the last node down by the stable add-front/remove-back recurrence.
+    """
+    n_bins = color.shape[0]
+    nb = n_bins - 1
+    n = np.arange(1, n_bins)  # run lengths
+    step = thick[:, None] / n[None, :]  # [k, n]
+    # Per-bin emission and transmittance for each step length; bins past the end are empty.
+    th = step[:, :, None] * tau_bin[None, None, :]  # [k, n, m]
+    t_bin = np.exp(-th)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        phi = np.where(th > 1e-12, -np.expm1(-th) / np.where(th > 0, th, 1.0), 1.0 - 0.5 * th)
+    c0 = color[None, None, :-1, :]
+    c1 = color[None, None, 1:, :]
+    c_bin = c0 - c1 * t_bin[..., None] + (c1 - c0) * phi[..., None]
+    c_bin *= (th > 0)[..., None]  # a transparent bin emits nothing (guards rounding)
+    prefix = np.concatenate([[0.0], np.cumsum(tau_bin)])
+
+    out = np.zeros((thick.shape[0], n_bins, n_bins, 3))
+    w = np.zeros((thick.shape[0], nb, 3))  # window sums, one per run length
+    k_idx = np.arange(thick.shape[0])[:, None]
+    n_idx = np.arange(nb)[None, :]
+    for i in range(nb - 1, -1, -1):
+        back = i + n  # bin leaving the window at the back
+        inside = back < nb
+        back_c = np.where(inside[None, :, None], c_bin[k_idx, n_idx, np.minimum(back, nb - 1)], 0.0)
+        # Transmittance of bins i+1 .. i+n-1 (those between the front and the leaving bin).
+        between = prefix[np.minimum(back, nb)] - prefix[i + 1]
+        t_between = np.exp(-step * between[None, :])
+        w = c_bin[:, :, i, :] + t_bin[:, :, i, None] * (w - t_between[..., None] * back_c)
+        out[:, 1:, i, :] = w
+    return np.clip(out, 0.0, None)
+
+
+def _thin_limit(color: NDArray[np.float64], tau_bin: NDArray[np.float64], tau_node: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Colour per unit alpha as thickness -> 0: the extinction-weighted mean colour."""
+    n_bins = color.shape[0]
+    weighted = tau_bin[:, None] * 0.5 * (color[:-1] + color[1:])
+    q = np.concatenate([np.zeros((1, 3)), np.cumsum(weighted, axis=0)])
+    p = np.concatenate([[0.0], np.cumsum(tau_bin)])
+    num = np.abs(q[:, None, :] - q[None, :, :])  # [sb, sf] symmetric
+    den = np.abs(p[:, None] - p[None, :])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(den[..., None] > 0, num / np.where(den > 0, den, 1.0)[..., None], 0.0)
+    i = np.arange(n_bins)
+    out[i, i] = np.where(tau_node[:, None] > 0, color, 0.0)
+    return np.clip(out, 0.0, 1.0)
