@@ -8,7 +8,10 @@ renderer is made.
 """
 
 from .camera import Camera
+from .image import psnr, rmse, write_png
 from .mesh import MeshReport, TetMesh, read
+from .render import render
+from .scene import Scene, demo_scene_path, load_scene
 from .settings import RenderSettings
 from .transfer import PRESETS, TransferFunction
 
@@ -21,6 +24,23 @@ __all__ = [
     "RenderSettings",
     "TetMesh",
     "TransferFunction",
+    "Renderer",
+    "Scene",
+    "demo_scene_path",
+    "load_scene",
+    "psnr",
     "read",
+    "render",
+    "rmse",
+    "write_png",
     "__version__",
 ]
+
+
+def __getattr__(name: str):
+    # The GL renderer is imported on first use, so `import tetvr` needs no OpenGL.
+    if name == "Renderer":
+        from .gl.renderer import Renderer
+
+        return Renderer
+    raise AttributeError(f"module 'tetvr' has no attribute {name!r}")

@@ -178,6 +178,10 @@ class Renderer:
     def _use_target(self, size: tuple[int, int]) -> None:
         if self._fbo is not None and self._fbo_size == size:
             return
+        if self._fbo is not None:
+            # Bind the default framebuffer first: deleting the bound one leaves GL pointing
+            # at a dead name, and the next framebuffer's creation reports INVALID_OPERATION.
+            self.ctx.detect_framebuffer(0).use()
         for o in (self._fbo, self._fbo_tex):
             if o is not None:
                 o.release()

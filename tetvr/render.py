@@ -1,0 +1,65 @@
+"""The one-call facade: ``tetvr.render(mesh, camera=..., tf=..., size=...)``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .camera import Camera
+from .mesh import TetMesh
+from .settings import RenderSettings
+from .transfer import TransferFunction
+
+__all__ = ["render", "default_transfer_function"]
+
+
+def default_transfer_function(mesh: TetMesh, *, preset: str = "viridis", opacity: float = 0.5) -> TransferFunction:
+    """A preset over the mesh's scalar range; unit distance 1/20 of the mesh's diagonal."""
+    lo, hi = mesh.scalar_range
+    if hi <= lo:
+        hi = lo + max(abs(lo), 1.0) * 1e-6
+    diag = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
+    return TransferFunction.preset(preset, (lo, hi), opacity=opacity, unit_distance=max(diag / 20.0, 1e-30))
+
+
+def render(
+    mesh: TetMesh,
+    *,
+    camera: Camera | None = None,
+    tf: TransferFunction | None = None,
+    size: tuple[int, int] = (512, 512),
+    settings: RenderSettings | None = None,
+    method: str = "gpu",
+    **kwargs: Any,
+) -> NDArray[np.float32]:
+    """Render a mesh to a premultiplied float RGBA image of shape (height, width, 4).
+
+    Parameters
+    ----------
+    mesh : the tetrahedral mesh (see :func:`tetvr.read`).
+    camera : defaults to :meth:`Camera.fit`.
+    tf : defaults to :func:`default_transfer_function`.
+    size : (width, height).
+    settings : GPU method settings.
+    method : ``"gpu"`` (projected tetrahedra through OpenGL) or ``"reference"`` (the
+        exact CPU ray caster, :func:`tetvr.reference.render_reference`).
+
+    Examples
+    --------
+    >>> import tetvr                                           # doctest: +SKIP
+    >>> image = tetvr.render(tetvr.read("mesh.vtu"), size=(256, 256))
+    """
+    camera = camera or Camera.fit(mesh)
+    tf = tf or default_transfer_function(mesh)
+    if method == "reference":
+        from .reference import render_reference
+
+        return render_reference(mesh, camera, tf, size, **kwargs)
+    if method != "gpu":
+        raise ValueError(f"method must be 'gpu' or 'reference', got {method!r}")
+    from .gl.renderer import Renderer
+
+    with Renderer(settings) as renderer:
+        return renderer.render(mesh, camera, tf, size=size, **kwargs)

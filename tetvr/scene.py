@@ -1,0 +1,152 @@
+"""Scenes as JSON: everything needed to render one image again.
+
+Schema (keys other than these are rejected; paths are relative to the JSON file)::
+
+    {
+      "mesh": "post.vtk",                 # any meshio-readable file            (required)
+      "scalars": "Pressure",              # point or cell field; default: the first
+      "component": null,                  # vector fields: null = magnitude, or an index
+      "transfer_function": {              # either a preset ...
+          "preset": "viridis", "range": null, "opacity": 0.5, "unit_distance": null
+      },                                  # ... or explicit {"color", "opacity", "unit_distance"}
+      "camera": {"fit": {"direction": [-1, -0.6, -1.2], "parallel": false}},
+                                          # ... or explicit Camera fields (position, ...)
+      "size": [512, 512],
+      "background": [1, 1, 1],            # for PNG output; the float image is translucent
+      "settings": {}                      # RenderSettings fields
+    }
+
+``range: null`` takes the field's range; ``unit_distance: null`` takes 1/20 of the mesh's
+bounding-box diagonal. :meth:`Scene.to_dict` writes the resolved, explicit form.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+
+from .camera import Camera
+from .mesh import TetMesh, read
+from .render import default_transfer_function
+from .settings import RenderSettings
+from .transfer import TransferFunction
+
+__all__ = ["Scene", "load_scene"]
+
+_KEYS = {"mesh", "scalars", "component", "transfer_function", "camera", "size", "background", "settings"}
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Scene:
+    """A resolved scene: the mesh is loaded and every parameter is explicit."""
+
+    mesh_path: str
+    mesh: TetMesh
+    tf: TransferFunction
+    camera: Camera
+    size: tuple[int, int] = (512, 512)
+    background: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    settings: RenderSettings = RenderSettings()
+    scalars: str | None = None
+    component: int | None = None
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], base_dir: str | os.PathLike[str] = ".") -> "Scene":
+        if not isinstance(data, dict):
+            raise ValueError(f"a scene must be a JSON object, got {type(data).__name__}")
+        unknown = set(data) - _KEYS
+        if unknown:
+            raise ValueError(f"unknown scene keys {sorted(unknown)}; allowed: {sorted(_KEYS)}")
+        if "mesh" not in data:
+            raise ValueError("the scene has no 'mesh' key (the path of the mesh file)")
+        path = Path(base_dir) / data["mesh"]
+        scalars = data.get("scalars")
+        component = data.get("component")
+        mesh = read(path, scalars, component=component)
+        tf = _transfer_function(data.get("transfer_function", {"preset": "viridis"}), mesh)
+        camera = _camera(data.get("camera", {"fit": {}}), mesh)
+        size = tuple(int(v) for v in data.get("size", (512, 512)))
+        if len(size) != 2 or min(size) < 1:
+            raise ValueError(f"size must be [width, height] with positive integers, got {data.get('size')!r}")
+        bg = tuple(float(v) for v in data.get("background", (1.0, 1.0, 1.0)))
+        if len(bg) != 3:
+            raise ValueError(f"background must be [r, g, b], got {data.get('background')!r}")
+        settings = RenderSettings.from_dict(data.get("settings", {}))
+        return cls(mesh_path=str(path), mesh=mesh, tf=tf, camera=camera, size=size,  # type: ignore[arg-type]
+                   background=bg, settings=settings, scalars=mesh.scalar_name, component=component)  # type: ignore[arg-type]
+
+    def to_dict(self, relative_to: str | os.PathLike[str] | None = None) -> dict[str, Any]:
+        mesh_path = self.mesh_path if relative_to is None else os.path.relpath(self.mesh_path, relative_to)
+        return {
+            "mesh": mesh_path,
+            "scalars": self.scalars,
+            "component": self.component,
+            "transfer_function": self.tf.to_dict(),
+            "camera": self.camera.to_dict(),
+            "size": list(self.size),
+            "background": list(self.background),
+            "settings": self.settings.to_dict(),
+        }
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        with open(path, "w") as f:
+            json.dump(self.to_dict(relative_to=Path(path).resolve().parent), f, indent=2)
+
+
+def load_scene(path: str | os.PathLike[str]) -> Scene:
+    """Read a scene JSON file (see the module docstring for the schema)."""
+    try:
+        with open(path) as f:
+            data = json.load(f)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not valid JSON ({exc})") from exc
+    return Scene.from_dict(data, base_dir=Path(path).resolve().parent)
+
+
+def _transfer_function(spec: dict[str, Any], mesh: TetMesh) -> TransferFunction:
+    if not isinstance(spec, dict):
+        raise ValueError(f"transfer_function must be an object, got {spec!r}")
+    if "preset" not in spec:
+        return TransferFunction.from_dict(spec)
+    unknown = set(spec) - {"preset", "range", "opacity", "unit_distance"}
+    if unknown:
+        raise ValueError(f"unknown transfer_function keys {sorted(unknown)}")
+    base = default_transfer_function(mesh)
+    rng = spec.get("range") or mesh.scalar_range
+    if rng[1] <= rng[0]:
+        rng = base.domain
+    u = spec.get("unit_distance") or base.unit_distance
+    opacity = spec.get("opacity", 0.5)
+    if isinstance(opacity, list):
+        opacity = [tuple(p) for p in opacity]
+    return TransferFunction.preset(spec["preset"], tuple(rng), opacity=opacity, unit_distance=u)
+
+
+def _camera(spec: dict[str, Any], mesh: TetMesh) -> Camera:
+    if not isinstance(spec, dict):
+        raise ValueError(f"camera must be an object, got {spec!r}")
+    if "fit" in spec:
+        if set(spec) != {"fit"}:
+            raise ValueError(f"a fitted camera takes only 'fit', got keys {sorted(spec)}")
+        fit = dict(spec["fit"])
+        allowed = {"direction", "view_up", "view_angle", "parallel", "zoom"}
+        unknown = set(fit) - allowed
+        if unknown:
+            raise ValueError(f"unknown camera.fit keys {sorted(unknown)}; allowed: {sorted(allowed)}")
+        return Camera.fit(mesh, **fit)
+    return Camera.from_dict(spec)
+
+
+def demo_scene_path() -> Path:
+    """The bundled demo scene (``meshes/demo.json``)."""
+    here = Path(__file__).resolve().parent
+    for candidate in (here / "meshes", here.parent / "meshes"):
+        if (candidate / "demo.json").is_file():
+            return candidate / "demo.json"
+    raise FileNotFoundError("the bundled demo scene (meshes/demo.json) is missing from this installation")
+
+
