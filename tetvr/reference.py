@@ -54,7 +54,7 @@ from numpy.typing import NDArray
 
 from .camera import Camera
 from .mesh import TetMesh
-from .optics import _SUB_THETA, integrate_pieces, piece_optical_depth
+from .optics import _SUB_THETA, MAX_OPACITY, integrate_pieces, piece_optical_depth
 from .transfer import TransferFunction
 
 __all__ = [
@@ -75,6 +75,10 @@ DEFAULT_CHUNK = 1 << 18
 # Pixel-centre boxes are widened by this much so that rounding in the projection never
 # drops a ray that touches the tet; the exact plane test then decides.
 _BOX_MARGIN_PX = 1e-6
+
+# Within a piece handed to integrate_pieces, 1 - opacity varies at most by this factor
+# (see _split_at_opacity_ratio).
+_MAX_X_RATIO = 2.0
 
 # Sub-pieces evaluated per integrate_pieces call: bounds its (n_sub, 6) temporaries.
 _SUB_BUDGET = 1 << 20
@@ -447,6 +451,8 @@ def integrate_segments(
     seg, s_a, s_b, piece_len = _split_at_breakpoints(s_in, s_out, length, tf.breakpoints)
     c_a, o_a = tf.evaluate(s_a)
     c_b, o_b = tf.evaluate(s_b)
+    part, c_a, c_b, o_a, o_b, piece_len = _split_at_opacity_ratio(c_a, c_b, o_a, o_b, piece_len)
+    seg = seg[part]
     rgb, theta = _integrate_batched(c_a, c_b, o_a, o_b, piece_len, tf.unit_distance)
     # Pieces are in ray order inside each segment, segments contiguous.
     excl = _exclusive_group_cumsum(theta, seg)
@@ -489,6 +495,52 @@ def _split_at_breakpoints(
     f_a = np.where(head, 0.0, np.clip((s_a - s0) / ds, 0.0, 1.0))
     f_b = np.where(tail, 1.0, np.clip((s_b - s0) / ds, 0.0, 1.0))
     return seg, s_a, s_b, (f_b - f_a) * length[seg]
+
+
+def _split_at_opacity_ratio(
+    c0: Float, c1: Float, a0: Float, a1: Float, length: Float
+) -> tuple[Int, Float, Float, Float, Float, Float]:
+    """Cut pieces so that ``1 - a`` changes by at most a factor _MAX_X_RATIO on each.
+
+    integrate_pieces cuts pieces only by optical depth, but its Gauss-Legendre rule
+    meets ``tau = -ln(1 - a) / u``, whose derivative ``a' / (1 - a)`` is huge where the
+    opacity ramps towards 1: a piece with opacity 1 -> 0 was measured 4.5e-5 off in
+    colour. Cutting at geometric steps of ``1 - a`` (opacity still linear on every
+    sub-piece, at most log2(1e6) = 20 cuts) brings that below 1e-10.
+
+    Returns, per sub-piece in ray order: index of its piece, front and back colour,
+    front and back opacity (clamped as integrate_pieces would), length.
+    """
+    a0 = np.clip(a0, 0.0, MAX_OPACITY)
+    a1 = np.clip(a1, 0.0, MAX_OPACITY)
+    x0, x1 = 1.0 - a0, 1.0 - a1
+    n_cut = np.ceil(np.abs(np.log(x1 / x0)) / math.log(_MAX_X_RATIO) - 1e-9).astype(np.int64)
+    n_sub = np.maximum(n_cut, 1)
+    if np.all(n_sub == 1):
+        return np.arange(length.shape[0], dtype=np.int64), c0, c1, a0, a1, length
+    part = np.repeat(np.arange(length.shape[0], dtype=np.int64), n_sub)
+    j = np.arange(part.shape[0], dtype=np.int64) - np.repeat(np.cumsum(n_sub) - n_sub, n_sub)
+    ns = n_sub[part].astype(np.float64)
+    xa, xb = x0[part], x1[part]
+    same = xa == xb
+    ratio = xb / xa
+
+    def frac(q: Float) -> tuple[Float, Float]:
+        # Fraction along the piece where 1 - a = xa * ratio**q, and the opacity there.
+        x = xa * ratio**q
+        f = np.where(same, q, (x - xa) / np.where(same, 1.0, xb - xa))
+        return np.clip(f, 0.0, 1.0), 1.0 - x
+
+    f_lo, o_lo = frac(j / ns)
+    f_hi, o_hi = frac((j + 1) / ns)
+    # The ends keep their exact values.
+    first, last = j == 0, j == n_sub[part] - 1
+    f_lo, o_lo = np.where(first, 0.0, f_lo), np.where(first, a0[part], o_lo)
+    f_hi, o_hi = np.where(last, 1.0, f_hi), np.where(last, a1[part], o_hi)
+    dc = (c1 - c0)[part]
+    c_lo = c0[part] + dc * f_lo[:, None]
+    c_hi = c0[part] + dc * f_hi[:, None]
+    return part, c_lo, c_hi, o_lo, o_hi, (f_hi - f_lo) * length[part]
 
 
 def _integrate_batched(
