@@ -2,7 +2,7 @@
 // classify.comp -- per-tet projective classification (Shirley & Tuchman 1990), computed on
 // the GPU on every view change as in IPTINT (Marroquim et al. 2008).
 //
-// In:  Points, Tets (common.glsl), u_view, u_proj, u_perspective, u_offset, u_count.
+// In:  Points, Tets (common.glsl), u_view, u_proj, u_perspective, u_near, u_offset, u_count.
 // Out: Fans[tet]: the silhouette polygon (3 or 4 vertices, cyclic) and the thick vertex,
 //      i.e. the front and back points (eye space) and scalars of the ray through it.
 //      Class 1: one vertex projects inside the triangle of the other three; it is the thick
@@ -35,13 +35,13 @@ void main() {
         p_eye[k] = (u_view * vec4(p.xyz, 1.0)).xyz;
         vec4 clip = u_proj * vec4(p_eye[k], 1.0);
         w[k] = clip.w;
-        behind = behind || clip.w <= 0.0;
+        behind = behind || -p_eye[k].z < u_near;
         p_ndc[k] = clip.xy / clip.w;
         s[k] = p.w;
     }
     TetFan fan;
     if (behind) {
-        fan.ids = ivec4(-1);
+        fan.ids = ivec4(-1 - t);
         fan.front = vec4(0.0);
         fan.back = vec4(0.0);
         fans[t] = fan;

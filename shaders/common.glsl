@@ -11,8 +11,10 @@
 //   binding 3  Order   uint tet ids, back to front
 
 struct TetFan {
-    ivec4 ids;     // silhouette vertices in cyclic order; ids.w < 0 for a 3-vertex silhouette;
-                   // ids.x < 0: the tet is not drawn (a vertex lies behind the eye)
+    ivec4 ids;     // silhouette vertices in cyclic order; ids.w < 0 for a 3-vertex silhouette.
+                   // ids.x < 0: the tet crosses the near plane (or the eye plane), where its
+                   // projection is unbounded: it is drawn as a full-screen quad whose
+                   // fragments intersect their ray with the tet exactly (tet id = -1 - ids.x).
     vec4 front;    // thick vertex, front point: xyz_eye, scalar
     vec4 back;     // thick vertex, back point:  xyz_eye, scalar
 };
@@ -23,3 +25,5 @@ layout(std430, binding = 1) readonly buffer Tets { ivec4 tets[]; };
 uniform mat4 u_view;        // obj -> eye
 uniform mat4 u_proj;        // eye -> clip
 uniform int u_perspective;  // 1: perspective projection, 0: parallel
+uniform float u_near;       // clipping range, eye depth
+uniform float u_far;

@@ -4,5 +4,6 @@
 noperspective in vec4 v_front;
 noperspective in vec4 v_back;
 noperspective in vec2 v_scalar;
+flat in int v_exact_tet;
 out vec4 f_color;
 void main() { f_color = vec4(0.001, 0.001, 0.001, 0.001); }

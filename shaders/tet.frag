@@ -3,23 +3,62 @@
 // 3D pre-integration table (Kraus et al. 2004), and emits premultiplied RGBA for
 // back-to-front "over" blending (ONE, ONE_MINUS_SRC_ALPHA) into an RGBA32F target.
 //
-// In:  v_front, v_back, v_scalar (see tet.vert); u_near, u_far (clipping range, > 0).
+// In:  v_front, v_back, v_scalar, v_exact_tet (see tet.vert); u_near, u_far, u_viewport.
 // Out: f_color, premultiplied.
 // The segment is clipped to the near and far planes here, per fragment, so tets that
 // cross them are cut rather than dropped.
 
+#include "common.glsl"
 #include "lookup.glsl"
 
 noperspective in vec4 v_front;
 noperspective in vec4 v_back;
 noperspective in vec2 v_scalar;
+flat in int v_exact_tet;
 
-uniform float u_near;
-uniform float u_far;
+uniform vec2 u_viewport;  // width, height in pixels
 
 out vec4 f_color;
 
+// The ray of this pixel against the tet's four face planes (for tets crossing the near
+// plane, whose projection cannot be fanned). Ray parameter t = eye depth.
+void exact_segment(int tet) {
+    ivec4 id = tets[tet];
+    vec3 p[4];
+    float s[4];
+    for (int k = 0; k < 4; ++k) {
+        vec4 q = points[id[k]];
+        p[k] = (u_view * vec4(q.xyz, 1.0)).xyz;
+        s[k] = q.w;
+    }
+    vec2 ndc = gl_FragCoord.xy / u_viewport * 2.0 - 1.0;
+    vec2 xy = ndc / vec2(u_proj[0][0], u_proj[1][1]);
+    vec3 o = u_perspective == 1 ? vec3(0.0) : vec3(xy, 0.0);
+    vec3 d = u_perspective == 1 ? vec3(xy, -1.0) : vec3(0.0, 0.0, -1.0);
+    float t0 = u_near, t1 = u_far;
+    for (int k = 0; k < 4; ++k) {
+        vec3 a = p[(k + 1) & 3], b = p[(k + 2) & 3], c = p[(k + 3) & 3];
+        vec3 n = cross(b - a, c - a);
+        if (dot(n, p[k] - a) > 0.0) n = -n;  // outward
+        float den = dot(n, d), num = dot(n, a - o);
+        if (den < 0.0) t0 = max(t0, num / den);
+        else if (den > 0.0) t1 = min(t1, num / den);
+        else if (num < 0.0) discard;
+    }
+    if (t1 <= t0) discard;
+    mat3 e = mat3(p[1] - p[0], p[2] - p[0], p[3] - p[0]);
+    mat3 inv = inverse(e);
+    vec3 ds = vec3(s[1] - s[0], s[2] - s[0], s[3] - s[0]);
+    float sf = s[0] + dot(inv * (o + t0 * d - p[0]), ds);
+    float sb = s[0] + dot(inv * (o + t1 * d - p[0]), ds);
+    f_color = lookup_segment(sf, sb, (t1 - t0) * length(d));
+}
+
 void main() {
+    if (v_exact_tet >= 0) {
+        exact_segment(v_exact_tet);
+        return;
+    }
     vec3 pf = v_front.xyz / v_front.w;
     vec3 pb = v_back.xyz / v_back.w;
     float sf = v_scalar.x / v_front.w;

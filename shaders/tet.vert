@@ -18,6 +18,7 @@ layout(std430, binding = 3) readonly buffer Order { uint order[]; };
 noperspective out vec4 v_front;
 noperspective out vec4 v_back;
 noperspective out vec2 v_scalar;
+flat out int v_exact_tet;  // >= 0: intersect the ray with this tet exactly in tet.frag
 
 void main() {
     uint tet = order[gl_VertexID / 12];
@@ -26,7 +27,16 @@ void main() {
     int k = corner % 3;
     TetFan fan = fans[tet];
     int count = fan.ids.w < 0 ? 3 : 4;
-    if (fan.ids.x < 0 || tri >= count) {
+    v_exact_tet = -1;
+    if (fan.ids.x < 0) {
+        // Crosses the near plane: a full-screen quad (corners 0-5), the rest degenerate.
+        const vec2 quad[6] = vec2[6](vec2(-1, -1), vec2(1, -1), vec2(1, 1), vec2(-1, -1), vec2(1, 1), vec2(-1, 1));
+        gl_Position = corner < 6 ? vec4(quad[corner], 0.0, 1.0) : vec4(2.0, 2.0, 0.0, 1.0);
+        v_exact_tet = -1 - fan.ids.x;
+        v_front = vec4(0.0); v_back = vec4(0.0); v_scalar = vec2(0.0);
+        return;
+    }
+    if (tri >= count) {
         // Not drawn: every corner at one point outside the view gives no fragments.
         gl_Position = vec4(2.0, 2.0, 0.0, 1.0);
         v_front = vec4(0.0); v_back = vec4(0.0); v_scalar = vec2(0.0);

@@ -163,3 +163,14 @@ def test_same_scene_twice_is_bit_identical(renderer):
     cam = Camera.fit(mesh)
     tf = _tf(mesh)
     assert np.array_equal(renderer.render(mesh, cam, tf, size=(64, 48)), renderer.render(mesh, cam, tf, size=(64, 48)))
+
+
+@pytest.mark.parametrize("name,camera", [
+    ("inside", Camera(position=(0.1, 0.05, 0.2), focal_point=(-0.3, -0.2, -1), view_angle=70, clipping_range=(0.01, 5))),
+    ("near_plane_cuts", Camera(position=(0, 0, 1.0), focal_point=(0, 0, 0), view_angle=40, clipping_range=(0.9, 5))),
+    ("eye_on_a_vertex_plane", Camera(position=(0, 0, 0.0), focal_point=(0.2, 0.1, -1), view_angle=60, clipping_range=(0.05, 5))),
+])
+def test_camera_inside_and_near_plane(renderer, name, camera):
+    # Tets crossing the near plane are intersected per fragment, not dropped.
+    mesh = synthetic.cube(6)
+    _compare(renderer, name, mesh, camera, _tf(mesh))

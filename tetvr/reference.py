@@ -17,7 +17,8 @@ accuracy volume renderer for unstructured data"):
    ``(t_out - t_in) * |d|``.
 4. The scalar is linear along a segment, so each segment is cut at the transfer
    function's breakpoints; colour and opacity are then linear on every piece, and
-   :func:`tetvr.optics.integrate_pieces` integrates each piece exactly.
+   :func:`tetvr.optics.integrate_pieces` integrates each piece exactly (see the error
+   bound below).
 5. Pieces are composited front to back per pixel: colour
    ``sum_k rgb_k exp(-sum_{j<k} theta_j)``, alpha ``1 - exp(-sum_k theta_k)``.
 
@@ -35,12 +36,16 @@ makes rasteriser fill conventions watertight).
 
 Error bound
 -----------
-Geometry is exact up to float64 rounding (``t`` to ~1e-15 of the scene size). Optical
-depth is exact in closed form; the colour of each piece is within ~1e-7 of the exact
-integral (the quadrature bound of :func:`tetvr.optics.integrate_pieces`; in practice it
-is ~1e-10). Pieces are weighted by transmittances <= 1, so a pixel is within ~1e-7 of
-the exact emission–absorption integral, before the final rounding to float32
-(relative 6e-8).
+Geometry is exact up to float64 rounding (``t`` to ~1e-15 of the scene size), and so
+is the optical depth (closed form). The colour of a piece is a Gauss–Legendre
+quadrature in :func:`tetvr.optics.integrate_pieces`, stated there to be within ~1e-7.
+That holds while the opacity stays away from 1; where it ramps towards 1 the extinction
+``-ln(1 - a)`` turns steep and the quadrature was measured up to 4.5e-5 off, so this
+renderer also cuts every piece where ``1 - a`` has changed by a factor of 2. Measured
+against graded fine quadrature, a piece is then within 1e-10 for any opacity
+(``tests/test_reference.py``). Pieces are weighted by transmittances <= 1, so a pixel
+is within ~1e-7 of the exact emission–absorption integral (in practice ~1e-9), before
+the final rounding to float32 (relative 6e-8).
 """
 
 from __future__ import annotations

@@ -230,7 +230,8 @@ class Renderer:
         persp = 0 if camera.parallel_projection else 1
 
         classify = self._program("classify")
-        _set(classify, u_view=view, u_proj=proj, u_perspective=persp, u_count=mesh.n_tets)
+        near, far = camera.clipping_range
+        _set(classify, u_view=view, u_proj=proj, u_perspective=persp, u_near=near, u_count=mesh.n_tets)
         self._mesh_buffers[0].bind_to_storage_buffer(0)
         self._mesh_buffers[1].bind_to_storage_buffer(1)
         self._fans.bind_to_storage_buffer(2)
@@ -252,8 +253,8 @@ class Renderer:
 
         prog = self._program(shader, PERSPECTIVE_CORRECT=int(s.perspective_correct),
                              TABLE_NORMALIZED=int(table.encoding == "normalized"))
-        near, far = camera.clipping_range
-        _set(prog, u_view=view, u_proj=proj, u_perspective=persp, u_near=near, u_far=far, u_scalar_range=table.scalar_range, u_d_min=table.d_min,
+        _set(prog, u_view=view, u_proj=proj, u_perspective=persp, u_near=near, u_far=far,
+             u_viewport=(float(width), float(height)), u_scalar_range=table.scalar_range, u_d_min=table.d_min,
              u_inv_log_base=1.0 / np.log(table.log_base), u_alpha_scale=table.alpha_scale,
              u_table_size=(table.n_bins, table.n_bins, table.n_slices + 1), u_table=0)
         self._use_target((width, height))

@@ -1,0 +1,508 @@
+"""Stage timings of the GPU projected-tetrahedra renderer, against its own fill-rate floor.
+
+For meshes from ~10k to ~1M tets this renders a 512x512 perspective view
+(:meth:`Camera.fit`, :func:`default_transfer_function` with opacity 0.5) with
+``Renderer(profile=True)`` and records, after warm-up, the median of each per-view stage
+(classify, sort, order_upload, draw, readback) over R frames. The first frame of each
+mesh is reported on its own (upload of the mesh buffers, table build, first draw).
+
+The peer in the same run is the *fill-rate floor*: the same mesh, camera and order drawn
+with ``shader="floor"`` (constant colour, same triangles and blending). Ratios to it
+(draw / floor draw, total / floor total) are what should carry between machines;
+absolute seconds are only for this machine.
+
+Also measured: the pre-integration table build (:func:`tetvr.preintegrate.build_table`,
+uncached, 16 slices, float32) for 128/256/512 bins, and the centroid sort alone for
+~1M tets.
+
+Writes ``<out>/stages.json`` (also after each section, and on Ctrl-C, so a partial run
+keeps what it measured) and ``<out>/stages.png``, and prints a table.
+
+Usage::
+
+    python bench/stages.py [--quick] [--out bench/results] [--repeats R] [--data DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+import warnings
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+from tqdm import tqdm
+
+import tetvr
+from tetvr import synthetic
+from tetvr.camera import Camera
+from tetvr.mesh import TetMesh
+from tetvr.preintegrate import build_table
+from tetvr.render import default_transfer_function
+from tetvr.settings import RenderSettings
+from tetvr.sort import centroid_order
+
+REPO = Path(__file__).resolve().parents[1]
+DEFAULT_DATA = REPO.parent / "shared" / "data" / "tets"
+
+SIZE = (512, 512)
+OPACITY = 0.5
+#: Per-view stages, in pipeline order; their sum is the per-view frame total.
+VIEW_STAGES = ("classify", "sort", "order_upload", "draw", "readback")
+#: Synthetic cubes: cube(n) has 6 n^3 tets (~10k, 105k, 330k, 1M).
+CUBE_NS = (12, 26, 38, 55)
+#: Real meshes (file, point field), used when the data folder exists.
+REAL_MESHES = (("bluntfin_tets.vtu", "Density"), ("combustor_tets.vtu", "Density"))
+#: Meshes above this many tets get fewer repeats (a 1M-tet frame takes seconds on llvmpipe).
+BIG_TETS = 500_000
+BIG_REPEATS = 3
+QUICK_MAX_TETS = 330_000
+TABLE_BINS = (128, 256, 512)
+TABLE_SLICES = 16
+TABLE_REPEATS = 3
+SORT_N = 55  # cube(55): 998,250 tets
+SORT_REPEATS = 10
+
+TARGETS = {
+    "sort_1m_s": {"limit": 0.050, "what": "centroid sort of ~1M tets <= 50 ms (median of 10, centroids cached)"},
+    "table_256_s": {"limit": 2.0, "what": "256x256x16 float32 table build <= 2 s (median of 3, uncached)"},
+    "frame_vs_floor": {"limit": 2.0, "what": "per-view frame total <= 2x the fill-rate floor's total, every mesh"},
+}
+
+
+# ---------------------------------------------------------------- helpers
+def _median(xs: list[float]) -> float:
+    return float(statistics.median(xs)) if xs else float("nan")
+
+
+def _ms(x: float | None) -> str:
+    if x is None or not np.isfinite(x):
+        return "-"
+    return f"{x * 1e3:.1f}" if x < 10 else f"{x * 1e3:.0f}"
+
+
+def _label(n_tets: int) -> str:
+    return f"{n_tets / 1e6:.2f}M" if n_tets >= 1e6 else f"{n_tets / 1e3:.0f}k"
+
+
+def _versions() -> dict[str, str]:
+    import moderngl
+
+    out = {"python": platform.python_version(), "numpy": np.__version__, "tetvr": tetvr.__version__,
+           "moderngl": getattr(moderngl, "__version__", "?")}
+    try:
+        import matplotlib
+
+        out["matplotlib"] = matplotlib.__version__
+    except ImportError:
+        out["matplotlib"] = "not installed"
+    return out
+
+
+def _machine() -> dict[str, Any]:
+    info: dict[str, Any] = {"cpu_count": os.cpu_count(), "platform": platform.platform(),
+                            "machine": platform.machine(), "processor": platform.processor()}
+    try:
+        info["cpu_affinity"] = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        pass
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                info["cpu_model"] = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    # llvmpipe's thread count follows these; record them so runs can be compared.
+    info["env"] = {k: os.environ[k] for k in ("LP_NUM_THREADS", "GALLIUM_DRIVER", "MESA_LOADER_DRIVER_OVERRIDE",
+                                              "EGL_PLATFORM", "OMP_NUM_THREADS") if k in os.environ}
+    info.update(_versions())
+    return info
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(data, indent=2, default=float) + "\n")
+    os.replace(tmp, path)  # never leave a half-written file behind
+
+
+def _mesh_specs(quick: bool, data_dir: Path) -> tuple[list[tuple[str, int, Callable[[], TetMesh]]], list[str]]:
+    """(name, expected tets, loader) in ascending size, and notes about what was skipped."""
+    specs: list[tuple[str, int, Callable[[], TetMesh]]] = []
+    notes: list[str] = []
+    for n in CUBE_NS:
+        specs.append((f"cube({n})", 6 * n**3, lambda n=n: synthetic.cube(n)))
+    if data_dir.is_dir():
+        for fname, field in REAL_MESHES:
+            path = data_dir / fname
+            if not path.exists():
+                notes.append(f"skipped {fname}: not in {data_dir}")
+                continue
+
+            def load(path: Path = path, field: str = field) -> TetMesh:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")  # "dropped N zero-volume tetrahedra"
+                    return tetvr.read(path, field)
+
+            # Size is unknown until read; the real meshes here are ~200k tets.
+            specs.append((f"{path.stem}:{field}", -1, load))
+    else:
+        notes.append(f"skipped real meshes: {data_dir} does not exist")
+    if quick:
+        kept = [s for s in specs if s[1] <= QUICK_MAX_TETS]
+        notes += [f"--quick: skipped {s[0]} ({s[1]} tets > {QUICK_MAX_TETS})" for s in specs if s not in kept]
+        specs = kept
+    return specs, notes
+
+
+# ---------------------------------------------------------------- measurements
+def _frame(renderer: Any, mesh: TetMesh, cam: Camera, tf: Any, shader: str) -> tuple[dict[str, float], float, np.ndarray]:
+    t0 = time.perf_counter()
+    image = renderer.render(mesh, cam, tf, size=SIZE, shader=shader)
+    wall = time.perf_counter() - t0
+    st = renderer.last_stats
+    stages = {k: float(getattr(st, k)) for k in ("upload", "table", *VIEW_STAGES)}
+    stages["total"] = sum(stages[k] for k in VIEW_STAGES)
+    return stages, wall, image
+
+
+def bench_mesh(renderer: Any, name: str, mesh: TetMesh, repeats: int, bar: tqdm) -> dict[str, Any]:
+    cam = Camera.fit(mesh)
+    tf = default_transfer_function(mesh, opacity=OPACITY)
+    rec: dict[str, Any] = {"name": name, "n_tets": mesh.n_tets, "n_points": mesh.n_points, "repeats": repeats}
+
+    # First frame of a new mesh: buffer upload and table build happen here, once.
+    renderer.profile = True
+    first, first_wall, image = _frame(renderer, mesh, cam, tf, "tet")
+    rec["first_frame"] = {"upload": first["upload"], "table": first["table"], "per_view_total": first["total"],
+                          "wall": first_wall}
+    alpha = image[..., 3]
+    rec["image"] = {"covered_fraction": float(np.mean(alpha > 1e-4)), "mean_alpha": float(alpha.mean()),
+                    "max_alpha": float(alpha.max())}
+    _frame(renderer, mesh, cam, tf, "floor")  # warm-up of the floor's path
+    bar.update(2)
+
+    samples: dict[str, list[dict[str, float]]] = {"tet": [], "floor": []}
+    walls: dict[str, list[float]] = {"tet": [], "floor": [], "tet_unprofiled": []}
+    # Interleave the real shader and the floor so drift (other load, clocks) hits both alike.
+    for _ in range(repeats):
+        for shader in ("tet", "floor"):
+            st, wall, _ = _frame(renderer, mesh, cam, tf, shader)
+            samples[shader].append(st)
+            walls[shader].append(wall)
+            bar.update(1)
+        # The same frame without the per-stage glFinish: what an application sees.
+        renderer.profile = False
+        t0 = time.perf_counter()
+        renderer.render(mesh, cam, tf, size=SIZE)
+        walls["tet_unprofiled"].append(time.perf_counter() - t0)
+        renderer.profile = True
+        bar.update(1)
+
+    def medians(rows: list[dict[str, float]]) -> dict[str, float]:
+        return {k: _median([r[k] for r in rows]) for k in ("table", *VIEW_STAGES, "total")}
+
+    rec["median"] = medians(samples["tet"])
+    rec["floor_median"] = medians(samples["floor"])
+    rec["median"]["table_lookup"] = rec["median"].pop("table")  # the cached-table hit, every frame
+    rec["floor_median"]["table_lookup"] = rec["floor_median"].pop("table")
+    rec["wall_median"] = {k: _median(v) for k, v in walls.items()}
+    rec["ratio"] = {"draw": rec["median"]["draw"] / rec["floor_median"]["draw"],
+                    "total": rec["median"]["total"] / rec["floor_median"]["total"]}
+    rec["samples"] = {"tet": samples["tet"], "floor": samples["floor"], "wall": walls}
+    return rec
+
+
+def bench_tables(repeats: int, bar: tqdm) -> dict[str, Any]:
+    mesh = synthetic.cube(12)
+    tf = default_transfer_function(mesh, opacity=OPACITY)
+    out: dict[str, Any] = {"n_slices": TABLE_SLICES, "dtype": "float32", "encoding": "normalized",
+                           "repeats": repeats, "by_bins": {}}
+    for n_bins in TABLE_BINS:
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            build_table(tf, mesh.scalar_range, mesh.max_edge, n_bins=n_bins, n_slices=TABLE_SLICES, dtype="float32")
+            times.append(time.perf_counter() - t0)
+            bar.update(1)
+        out["by_bins"][str(n_bins)] = {"median": _median(times), "samples": times}
+    return out
+
+
+def bench_sort(mesh: TetMesh | None, repeats: int, bar: tqdm) -> dict[str, Any]:
+    mesh = mesh if mesh is not None and mesh.n_tets == 6 * SORT_N**3 else synthetic.cube(SORT_N)
+    cam = Camera.fit(mesh)
+    fresh = mesh.__dict__.get("centroids") is None
+    t0 = time.perf_counter()
+    centroid_order(mesh, cam)  # warm-up; also fills the cached centroids
+    first = time.perf_counter() - t0
+    bar.update(1)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        centroid_order(mesh, cam)
+        times.append(time.perf_counter() - t0)
+        bar.update(1)
+    return {"n_tets": mesh.n_tets, "repeats": repeats, "median": _median(times), "samples": times,
+            "first_call": first, "first_call_includes_centroids": fresh}
+
+
+def evaluate_targets(res: dict[str, Any]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    sort = res.get("sort")
+    if sort:
+        v = sort["median"]
+        out["sort_1m_s"] = {**TARGETS["sort_1m_s"], "value": v, "pass": v <= TARGETS["sort_1m_s"]["limit"]}
+    tab = res.get("table", {}).get("by_bins", {}).get("256")
+    if tab:
+        v = tab["median"]
+        out["table_256_s"] = {**TARGETS["table_256_s"], "value": v, "pass": v <= TARGETS["table_256_s"]["limit"]}
+    meshes = res.get("meshes", [])
+    if meshes:
+        per = {m["name"]: m["ratio"]["total"] for m in meshes}
+        worst = max(per.values())
+        out["frame_vs_floor"] = {**TARGETS["frame_vs_floor"], "value": worst, "per_mesh": per,
+                                 "pass": worst <= TARGETS["frame_vs_floor"]["limit"]}
+    return out
+
+
+# ---------------------------------------------------------------- output
+def print_table(res: dict[str, Any]) -> None:
+    meshes = res.get("meshes", [])
+    if meshes:
+        head = (f"{'mesh':<22}{'tets':>9}{'R':>3} | {'upload':>7}{'table':>7} | {'classify':>8}{'sort':>7}"
+                f"{'order':>7}{'draw':>8}{'readbk':>7}{'total':>8} | {'floor':>7}{'draw/fl':>8}{'tot/fl':>7} | {'wall':>7}")
+        print("\nper-view stage medians, ms (upload/table: first frame only; wall: profile=False)")
+        print(head)
+        print("-" * len(head))
+        for m in meshes:
+            md, fl, r, ff = m["median"], m["floor_median"], m["ratio"], m["first_frame"]
+            print(f"{m['name']:<22}{m['n_tets']:>9}{m['repeats']:>3} | {_ms(ff['upload']):>7}{_ms(ff['table']):>7} | "
+                  f"{_ms(md['classify']):>8}{_ms(md['sort']):>7}{_ms(md['order_upload']):>7}{_ms(md['draw']):>8}"
+                  f"{_ms(md['readback']):>7}{_ms(md['total']):>8} | {_ms(fl['total']):>7}{r['draw']:>8.2f}"
+                  f"{r['total']:>7.2f} | {_ms(m['wall_median']['tet_unprofiled']):>7}")
+    tab = res.get("table")
+    if tab:
+        cells = ", ".join(f"{k}: {v['median']:.3f} s" for k, v in tab["by_bins"].items())
+        print(f"\ntable build (NxNx{tab['n_slices']} float32, median of {tab['repeats']}): {cells}")
+    sort = res.get("sort")
+    if sort:
+        print(f"centroid sort, {sort['n_tets']} tets: median {sort['median'] * 1e3:.1f} ms "
+              f"(first call {sort['first_call'] * 1e3:.0f} ms incl. centroids)")
+    targets = res.get("targets", {})
+    if targets:
+        print("\ntargets:")
+        for key, t in targets.items():
+            unit = "x" if key == "frame_vs_floor" else " s"
+            print(f"  [{'PASS' if t['pass'] else 'FAIL'}] {t['what']}: {t['value']:.3f}{unit}")
+    if res.get("interrupted"):
+        print("\n(interrupted: partial results)")
+
+
+def plot(res: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    meshes = sorted(res.get("meshes", []), key=lambda m: m["n_tets"])
+    fig, axes = plt.subplots(2, 2, figsize=(14, 10))
+    colours = dict(zip(VIEW_STAGES, ("#4c72b0", "#dd8452", "#937860", "#c44e52", "#55a868")))
+    labels = [f"{m['name']}\n{_label(m['n_tets'])} tets" for m in meshes]
+    x = np.arange(len(meshes))
+    gl = res.get("gl", {}).get("GL_RENDERER", "?")
+
+    # (a) grouped stage medians, log scale, with the floor's draw and totals.
+    ax = axes[0, 0]
+    width = 0.8 / (len(VIEW_STAGES) + 1)
+    for i, stage in enumerate(VIEW_STAGES):
+        vals = [max(m["median"][stage], 1e-6) * 1e3 for m in meshes]
+        ax.bar(x + (i - len(VIEW_STAGES) / 2) * width, vals, width, color=colours[stage], label=stage)
+    vals = [m["floor_median"]["draw"] * 1e3 for m in meshes]
+    ax.bar(x + len(VIEW_STAGES) / 2 * width, vals, width, color="white", edgecolor="black", hatch="//",
+           label="floor draw")
+    for xi, m in zip(x, meshes):
+        lo, hi = xi - 0.42, xi + 0.42
+        ax.hlines(m["median"]["total"] * 1e3, lo, hi, colors="black", lw=1.5)
+        ax.hlines(m["floor_median"]["total"] * 1e3, lo, hi, colors="black", lw=1.2, linestyles="--")
+        ax.annotate(f"x{m['ratio']['total']:.2f}", (xi, m["median"]["total"] * 1e3), textcoords="offset points",
+                    xytext=(0, 4), ha="center", fontsize=9, fontweight="bold")
+    ax.plot([], [], color="black", lw=1.5, label="frame total")
+    ax.plot([], [], color="black", lw=1.2, ls="--", label="floor total")
+    ax.set_yscale("log")
+    ax.set_xticks(x, labels, fontsize=8)
+    ax.set_ylabel("median per frame, ms (log)")
+    ax.set_title(f"Per-view stages at {SIZE[0]}x{SIZE[1]} (x = total / floor total)")
+    ax.legend(fontsize=8, ncol=2, loc="upper left")
+    ax.grid(axis="y", which="both", alpha=0.3)
+
+    # (b) composition of the frame, stacked to 100 %, with the floor's share marked.
+    ax = axes[0, 1]
+    bottom = np.zeros(len(meshes))
+    for stage in VIEW_STAGES:
+        share = np.array([m["median"][stage] / m["median"]["total"] * 100 for m in meshes])
+        ax.bar(x, share, 0.6, bottom=bottom, color=colours[stage], label=stage)
+        bottom += share
+    for xi, m in zip(x, meshes):
+        f = m["floor_median"]["total"] / m["median"]["total"] * 100
+        ax.hlines(f, xi - 0.38, xi + 0.38, colors="black", lw=2, linestyles="--")
+    ax.plot([], [], color="black", lw=2, ls="--", label="floor total")
+    ax.hlines(50, -0.5, len(meshes) - 0.5, colors="grey", lw=0.8, linestyles=":")
+    ax.set_xticks(x, labels, fontsize=8)
+    ax.set_ylim(0, 100)
+    ax.set_ylabel("% of per-view frame total")
+    ax.set_title("Where the frame goes (target: floor line at or above 50 %)")
+    ax.legend(fontsize=8, loc="lower right", framealpha=0.9)
+
+    # (c) table build vs bins.
+    ax = axes[1, 0]
+    tab = res.get("table", {}).get("by_bins", {})
+    if tab:
+        ns = np.array([int(k) for k in tab])
+        ts = np.array([v["median"] for v in tab.values()])
+        ax.loglog(ns, ts, "o-", color="#4c72b0", label=f"build_table, {TABLE_SLICES} slices, float32")
+        for n, t in zip(ns, ts):
+            ax.annotate(f"{t:.2f} s", (n, t), textcoords="offset points", xytext=(6, -12), fontsize=9)
+        ref = ts[0] * (ns / ns[0]) ** 2
+        ax.loglog(ns, ref, ":", color="grey", label="~N^2 from the first point")
+        ax.axhline(TARGETS["table_256_s"]["limit"], color="#c44e52", ls="--", label="target for N=256: 2 s")
+        ax.set_xticks(ns, [str(n) for n in ns])
+        ax.minorticks_off()
+    ax.set_xlabel("N (scalar bins per axis)")
+    ax.set_ylabel("seconds (median)")
+    ax.set_title("Pre-integration table build (uncached)")
+    ax.legend(fontsize=8)
+    ax.grid(which="both", alpha=0.3)
+
+    # (d) scaling with mesh size, with the sort target.
+    ax = axes[1, 1]
+    if meshes:
+        n = np.array([m["n_tets"] for m in meshes])
+        for key, style, lab in (("total", "o-", "frame total"), ("draw", "s-", "draw")):
+            ax.loglog(n, [m["median"][key] * 1e3 for m in meshes], style, label=lab)
+        ax.loglog(n, [m["floor_median"]["total"] * 1e3 for m in meshes], "o--", color="black", label="floor total")
+        ax.loglog(n, [m["median"]["sort"] * 1e3 for m in meshes], "^-", label="sort (in frame)")
+        ax.loglog(n, [m["median"]["classify"] * 1e3 for m in meshes], "v-", label="classify")
+    sort = res.get("sort")
+    if sort:
+        ax.loglog([sort["n_tets"]], [sort["median"] * 1e3], "*", ms=14, color="#dd8452",
+                  label=f"centroid sort alone: {sort['median'] * 1e3:.1f} ms")
+        ax.axhline(TARGETS["sort_1m_s"]["limit"] * 1e3, color="#dd8452", ls=":", label="sort target at 1M: 50 ms")
+    ax.set_xlabel("tets")
+    ax.set_ylabel("ms per frame (median)")
+    ax.set_title("Scaling with mesh size")
+    ax.legend(fontsize=8)
+    ax.grid(which="both", alpha=0.3)
+
+    when = res.get("timestamp", "")[:16].replace("T", " ")
+    fig.suptitle(f"tetvr stage benchmark - {gl} - {res.get('machine', {}).get('cpu_count', '?')} CPUs - {when}"
+                 + ("  (PARTIAL)" if res.get("interrupted") else ""), fontsize=12)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+# ---------------------------------------------------------------- main
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help=f"3 repeats, meshes <= {QUICK_MAX_TETS} tets")
+    ap.add_argument("--out", type=Path, default=REPO / "bench" / "results", help="output folder")
+    ap.add_argument("--repeats", type=int, default=None, help="frames per mesh after warm-up (default 5, 3 with --quick)")
+    ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder with the real .vtu meshes")
+    args = ap.parse_args(argv)
+    repeats = args.repeats or (3 if args.quick else 5)
+    if repeats < 1:
+        ap.error("--repeats must be >= 1")
+    json_path, png_path = args.out / "stages.json", args.out / "stages.png"
+
+    from tetvr.gl.renderer import Renderer
+
+    specs, notes = _mesh_specs(args.quick, args.data)
+    res: dict[str, Any] = {
+        "timestamp": _dt.datetime.now().astimezone().isoformat(timespec="seconds"),
+        "command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
+        "quick": args.quick, "size": list(SIZE), "opacity": OPACITY, "repeats": repeats,
+        "big_mesh_repeats": {"above_tets": BIG_TETS, "repeats": min(repeats, BIG_REPEATS)},
+        "settings": RenderSettings().to_dict(), "machine": _machine(), "notes": notes,
+        "meshes": [], "interrupted": False, "complete": False,
+        "definitions": {
+            "per_view_stages": list(VIEW_STAGES),
+            "total": "sum of the per-view stages (profile=True: glFinish after each stage)",
+            "first_frame": "the first frame after switching to a mesh: upload = mesh buffers, table = table build",
+            "table_lookup": "per frame, the cached table_for lookup (not in total)",
+            "floor": "same mesh, camera and sort, shader='floor' (constant colour): the fill-rate floor",
+            "wall_median.tet_unprofiled": "wall time of render() with profile=False (no per-stage glFinish)",
+        },
+    }
+    n_frames = sum(2 + 3 * (min(repeats, BIG_REPEATS) if t > BIG_TETS else repeats) for _, t, _ in specs)
+    total_work = 1 + n_frames + len(TABLE_BINS) * TABLE_REPEATS + 1 + SORT_REPEATS
+    big_mesh: TetMesh | None = None
+    status = 0
+    bar = tqdm(total=total_work, unit="step", dynamic_ncols=True, file=sys.stderr)
+    try:
+        with Renderer(profile=True) as renderer:
+            res["gl"] = dict(renderer.gl_info)
+            # Compile every program once on a tiny mesh so no mesh's first frame pays for it.
+            t0 = time.perf_counter()
+            tiny = synthetic.single_tet()
+            tf_tiny = default_transfer_function(tiny, opacity=OPACITY)
+            for shader in ("tet", "floor"):
+                renderer.render(tiny, Camera.fit(tiny), tf_tiny, size=SIZE, shader=shader)
+            res["compile_and_first_use_s"] = time.perf_counter() - t0
+            bar.update(1)
+            for name, expected, load in specs:
+                bar.set_description(f"load {name}")
+                t0 = time.perf_counter()
+                mesh = load()
+                load_s = time.perf_counter() - t0
+                if args.quick and mesh.n_tets > QUICK_MAX_TETS:
+                    notes.append(f"--quick: skipped {name} ({mesh.n_tets} tets > {QUICK_MAX_TETS})")
+                    bar.total -= 2 + 3 * repeats
+                    continue
+                r = min(repeats, BIG_REPEATS) if mesh.n_tets > BIG_TETS else repeats
+                if expected < 0:  # size was unknown when the bar was sized
+                    bar.total += 3 * r - 3 * repeats
+                bar.set_description(f"{name} {_label(mesh.n_tets)}")
+                rec = bench_mesh(renderer, name, mesh, r, bar)
+                rec["load_s"] = load_s
+                res["meshes"].append(rec)
+                res["targets"] = evaluate_targets(res)
+                _write_json(json_path, res)
+                if mesh.n_tets == 6 * SORT_N**3:
+                    big_mesh = mesh
+                del mesh
+        bar.set_description("table build")
+        res["table"] = bench_tables(TABLE_REPEATS, bar)
+        res["targets"] = evaluate_targets(res)
+        _write_json(json_path, res)
+        bar.set_description("centroid sort 1M")
+        res["sort"] = bench_sort(big_mesh, SORT_REPEATS, bar)
+        res["complete"] = True
+    except KeyboardInterrupt:
+        res["interrupted"] = True
+        status = 130
+    finally:
+        bar.close()
+    res["targets"] = evaluate_targets(res)
+    _write_json(json_path, res)
+    print_table(res)
+    try:
+        plot(res, png_path)
+        print(f"\nwrote {json_path} and {png_path}")
+    except KeyboardInterrupt:
+        print(f"\nwrote {json_path} (chart skipped)")
+        status = 130
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())
