@@ -53,6 +53,8 @@ REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = REPO.parent / "shared" / "data" / "tets"
 
 SIZE = (512, 512)
+#: Target size of the geometry-only floor (same draw, almost no fragments).
+GEOMETRY_SIZE = (16, 16)
 OPACITY = 0.5
 #: Per-view stages, in pipeline order; their sum is the per-view frame total.
 VIEW_STAGES = ("classify", "sort", "order_upload", "draw", "readback")
@@ -127,6 +129,14 @@ def _machine() -> dict[str, Any]:
     return info
 
 
+def _loadavg() -> list[float] | None:
+    # Other work on the same cores shows up as noise in every stage; keep a trace of it.
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        return None
+
+
 def _write_json(path: Path, data: dict[str, Any]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".json.tmp")
@@ -153,7 +163,7 @@ def _mesh_specs(quick: bool, data_dir: Path) -> tuple[list[tuple[str, int, Calla
                     return tetvr.read(path, field)
 
             # Size is unknown until read; the real meshes here are ~200k tets.
-            specs.append((f"{path.stem}:{field}", -1, load))
+            specs.append((f"{path.stem.removesuffix('_tets')} ({field})", -1, load))
     else:
         notes.append(f"skipped real meshes: {data_dir} does not exist")
     if quick:
@@ -207,6 +217,16 @@ def bench_mesh(renderer: Any, name: str, mesh: TetMesh, repeats: int, bar: tqdm)
         renderer.profile = True
         bar.update(1)
 
+    # The floor shader at a tiny target: vertex fetch, fan expansion and triangle setup with
+    # almost no fragments, i.e. what draw costs when it is not fill-bound.
+    geometry: list[float] = []
+    for i in range(repeats + 1):
+        renderer.render(mesh, cam, tf, size=GEOMETRY_SIZE, shader="floor")
+        if i:  # the first one resizes the target and is a warm-up
+            geometry.append(float(renderer.last_stats.draw))
+        bar.update(1)
+    # (The next mesh's first frame resizes the target back; it is not in any median.)
+
     def medians(rows: list[dict[str, float]]) -> dict[str, float]:
         return {k: _median([r[k] for r in rows]) for k in ("table", *VIEW_STAGES, "total")}
 
@@ -217,7 +237,12 @@ def bench_mesh(renderer: Any, name: str, mesh: TetMesh, repeats: int, bar: tqdm)
     rec["wall_median"] = {k: _median(v) for k, v in walls.items()}
     rec["ratio"] = {"draw": rec["median"]["draw"] / rec["floor_median"]["draw"],
                     "total": rec["median"]["total"] / rec["floor_median"]["total"]}
-    rec["samples"] = {"tet": samples["tet"], "floor": samples["floor"], "wall": walls}
+    # Each repeat pairs a tet frame with a floor frame rendered right after it; the median
+    # of the per-pair ratios is less sensitive to load that drifts during the run.
+    rec["ratio_paired"] = {k: _median([t[k] / f[k] for t, f in zip(samples["tet"], samples["floor"])])
+                           for k in ("draw", "total")}
+    rec["geometry_floor_draw"] = _median(geometry)
+    rec["samples"] = {"tet": samples["tet"], "floor": samples["floor"], "wall": walls, "geometry_floor_draw": geometry}
     return rec
 
 
@@ -278,17 +303,19 @@ def evaluate_targets(res: dict[str, Any]) -> dict[str, Any]:
 def print_table(res: dict[str, Any]) -> None:
     meshes = res.get("meshes", [])
     if meshes:
-        head = (f"{'mesh':<22}{'tets':>9}{'R':>3} | {'upload':>7}{'table':>7} | {'classify':>8}{'sort':>7}"
-                f"{'order':>7}{'draw':>8}{'readbk':>7}{'total':>8} | {'floor':>7}{'draw/fl':>8}{'tot/fl':>7} | {'wall':>7}")
-        print("\nper-view stage medians, ms (upload/table: first frame only; wall: profile=False)")
+        head = (f"{'mesh':<20}{'tets':>9}{'R':>3} | {'upload':>7}{'table':>7} | {'classify':>8}{'sort':>7}"
+                f"{'order':>7}{'draw':>8}{'readbk':>7}{'total':>8} | {'floor':>7}{'draw/fl':>8}{'tot/fl':>7}{'geom':>7} | {'wall':>7}")
+        print(f"\nper-view stage medians at {SIZE[0]}x{SIZE[1]}, ms.  upload/table: first frame only; floor: total of "
+              f"the floor shader;\ngeom: floor draw at {GEOMETRY_SIZE[0]}x{GEOMETRY_SIZE[1]} (no fill); "
+              "wall: whole render() with profile=False")
         print(head)
         print("-" * len(head))
         for m in meshes:
             md, fl, r, ff = m["median"], m["floor_median"], m["ratio"], m["first_frame"]
-            print(f"{m['name']:<22}{m['n_tets']:>9}{m['repeats']:>3} | {_ms(ff['upload']):>7}{_ms(ff['table']):>7} | "
+            print(f"{m['name']:<20}{m['n_tets']:>9}{m['repeats']:>3} | {_ms(ff['upload']):>7}{_ms(ff['table']):>7} | "
                   f"{_ms(md['classify']):>8}{_ms(md['sort']):>7}{_ms(md['order_upload']):>7}{_ms(md['draw']):>8}"
                   f"{_ms(md['readback']):>7}{_ms(md['total']):>8} | {_ms(fl['total']):>7}{r['draw']:>8.2f}"
-                  f"{r['total']:>7.2f} | {_ms(m['wall_median']['tet_unprofiled']):>7}")
+                  f"{r['total']:>7.2f}{_ms(m['geometry_floor_draw']):>7} | {_ms(m['wall_median']['tet_unprofiled']):>7}")
     tab = res.get("table")
     if tab:
         cells = ", ".join(f"{k}: {v['median']:.3f} s" for k, v in tab["by_bins"].items())
@@ -316,7 +343,7 @@ def plot(res: dict[str, Any], path: Path) -> None:
     meshes = sorted(res.get("meshes", []), key=lambda m: m["n_tets"])
     fig, axes = plt.subplots(2, 2, figsize=(14, 10))
     colours = dict(zip(VIEW_STAGES, ("#4c72b0", "#dd8452", "#937860", "#c44e52", "#55a868")))
-    labels = [f"{m['name']}\n{_label(m['n_tets'])} tets" for m in meshes]
+    labels = [f"{m['name'].replace(' (', chr(10) + '(')}\n{_label(m['n_tets'])} tets" for m in meshes]
     x = np.arange(len(meshes))
     gl = res.get("gl", {}).get("GL_RENDERER", "?")
 
@@ -329,6 +356,8 @@ def plot(res: dict[str, Any], path: Path) -> None:
     vals = [m["floor_median"]["draw"] * 1e3 for m in meshes]
     ax.bar(x + len(VIEW_STAGES) / 2 * width, vals, width, color="white", edgecolor="black", hatch="//",
            label="floor draw")
+    ax.plot(x + len(VIEW_STAGES) / 2 * width, [m["geometry_floor_draw"] * 1e3 for m in meshes], "k_", ms=12, mew=2,
+            label=f"floor draw at {GEOMETRY_SIZE[0]}x{GEOMETRY_SIZE[1]}")
     for xi, m in zip(x, meshes):
         lo, hi = xi - 0.42, xi + 0.42
         ax.hlines(m["median"]["total"] * 1e3, lo, hi, colors="black", lw=1.5)
@@ -338,10 +367,12 @@ def plot(res: dict[str, Any], path: Path) -> None:
     ax.plot([], [], color="black", lw=1.5, label="frame total")
     ax.plot([], [], color="black", lw=1.2, ls="--", label="floor total")
     ax.set_yscale("log")
+    if meshes:
+        ax.set_ylim(top=max(m["median"]["total"] for m in meshes) * 1e3 * 40)  # room for the legend
     ax.set_xticks(x, labels, fontsize=8)
     ax.set_ylabel("median per frame, ms (log)")
     ax.set_title(f"Per-view stages at {SIZE[0]}x{SIZE[1]} (x = total / floor total)")
-    ax.legend(fontsize=8, ncol=2, loc="upper left")
+    ax.legend(fontsize=8, ncol=5, loc="upper left")
     ax.grid(axis="y", which="both", alpha=0.3)
 
     # (b) composition of the frame, stacked to 100 %, with the floor's share marked.
@@ -373,7 +404,7 @@ def plot(res: dict[str, Any], path: Path) -> None:
             ax.annotate(f"{t:.2f} s", (n, t), textcoords="offset points", xytext=(6, -12), fontsize=9)
         ref = ts[0] * (ns / ns[0]) ** 2
         ax.loglog(ns, ref, ":", color="grey", label="~N^2 from the first point")
-        ax.axhline(TARGETS["table_256_s"]["limit"], color="#c44e52", ls="--", label="target for N=256: 2 s")
+        ax.plot([256], [TARGETS["table_256_s"]["limit"]], "v", color="#c44e52", ms=10, label="target for N=256: <= 2 s")
         ax.set_xticks(ns, [str(n) for n in ns])
         ax.minorticks_off()
     ax.set_xlabel("N (scalar bins per axis)")
@@ -382,20 +413,29 @@ def plot(res: dict[str, Any], path: Path) -> None:
     ax.legend(fontsize=8)
     ax.grid(which="both", alpha=0.3)
 
-    # (d) scaling with mesh size, with the sort target.
+    # (d) scaling with mesh size: cubes as lines, real meshes as open markers of the same colour.
     ax = axes[1, 1]
-    if meshes:
-        n = np.array([m["n_tets"] for m in meshes])
-        for key, style, lab in (("total", "o-", "frame total"), ("draw", "s-", "draw")):
-            ax.loglog(n, [m["median"][key] * 1e3 for m in meshes], style, label=lab)
-        ax.loglog(n, [m["floor_median"]["total"] * 1e3 for m in meshes], "o--", color="black", label="floor total")
-        ax.loglog(n, [m["median"]["sort"] * 1e3 for m in meshes], "^-", label="sort (in frame)")
-        ax.loglog(n, [m["median"]["classify"] * 1e3 for m in meshes], "v-", label="classify")
+    cubes = [m for m in meshes if m["name"].startswith("cube")]
+    real = [m for m in meshes if not m["name"].startswith("cube")]
+    series = (("frame total", "o-", "C0", lambda m: m["median"]["total"]),
+              ("floor total", "o--", "black", lambda m: m["floor_median"]["total"]),
+              (f"floor draw at {GEOMETRY_SIZE[0]}x{GEOMETRY_SIZE[1]}", "x:", "grey", lambda m: m["geometry_floor_draw"]),
+              ("classify", "v-", "C3", lambda m: m["median"]["classify"]),
+              ("sort (in frame)", "^-", "C2", lambda m: m["median"]["sort"]))
+    for lab, style, colour, get in series:
+        if cubes:
+            ax.loglog([m["n_tets"] for m in cubes], [get(m) * 1e3 for m in cubes], style, color=colour, label=lab)
+        if real:
+            ax.loglog([m["n_tets"] for m in real], [get(m) * 1e3 for m in real], style[0], color=colour, mfc="none",
+                      ms=9)
+    if real:
+        ax.plot([], [], "o", color="black", mfc="none", ms=9, label="open: real meshes")
     sort = res.get("sort")
     if sort:
         ax.loglog([sort["n_tets"]], [sort["median"] * 1e3], "*", ms=14, color="#dd8452",
                   label=f"centroid sort alone: {sort['median'] * 1e3:.1f} ms")
-        ax.axhline(TARGETS["sort_1m_s"]["limit"] * 1e3, color="#dd8452", ls=":", label="sort target at 1M: 50 ms")
+        ax.plot([sort["n_tets"]], [TARGETS["sort_1m_s"]["limit"] * 1e3], "v", color="#c44e52", ms=10,
+                label="sort target at 1M: <= 50 ms")
     ax.set_xlabel("tets")
     ax.set_ylabel("ms per frame (median)")
     ax.set_title("Scaling with mesh size")
@@ -432,7 +472,7 @@ def main(argv: list[str] | None = None) -> int:
         "command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
         "quick": args.quick, "size": list(SIZE), "opacity": OPACITY, "repeats": repeats,
         "big_mesh_repeats": {"above_tets": BIG_TETS, "repeats": min(repeats, BIG_REPEATS)},
-        "settings": RenderSettings().to_dict(), "machine": _machine(), "notes": notes,
+        "settings": RenderSettings().to_dict(), "machine": _machine(), "notes": notes, "loadavg_start": _loadavg(),
         "meshes": [], "interrupted": False, "complete": False,
         "definitions": {
             "per_view_stages": list(VIEW_STAGES),
@@ -441,9 +481,11 @@ def main(argv: list[str] | None = None) -> int:
             "table_lookup": "per frame, the cached table_for lookup (not in total)",
             "floor": "same mesh, camera and sort, shader='floor' (constant colour): the fill-rate floor",
             "wall_median.tet_unprofiled": "wall time of render() with profile=False (no per-stage glFinish)",
+            "ratio": "median tet / median floor; ratio_paired: median of per-repeat tet / floor",
+            "geometry_floor_draw": f"draw stage of the floor shader at {GEOMETRY_SIZE}: the non-fill part of draw",
         },
     }
-    n_frames = sum(2 + 3 * (min(repeats, BIG_REPEATS) if t > BIG_TETS else repeats) for _, t, _ in specs)
+    n_frames = sum(3 + 4 * (min(repeats, BIG_REPEATS) if t > BIG_TETS else repeats) for _, t, _ in specs)
     total_work = 1 + n_frames + len(TABLE_BINS) * TABLE_REPEATS + 1 + SORT_REPEATS
     big_mesh: TetMesh | None = None
     status = 0
@@ -466,11 +508,11 @@ def main(argv: list[str] | None = None) -> int:
                 load_s = time.perf_counter() - t0
                 if args.quick and mesh.n_tets > QUICK_MAX_TETS:
                     notes.append(f"--quick: skipped {name} ({mesh.n_tets} tets > {QUICK_MAX_TETS})")
-                    bar.total -= 2 + 3 * repeats
+                    bar.total -= 3 + 4 * repeats
                     continue
                 r = min(repeats, BIG_REPEATS) if mesh.n_tets > BIG_TETS else repeats
                 if expected < 0:  # size was unknown when the bar was sized
-                    bar.total += 3 * r - 3 * repeats
+                    bar.total += 4 * r - 4 * repeats
                 bar.set_description(f"{name} {_label(mesh.n_tets)}")
                 rec = bench_mesh(renderer, name, mesh, r, bar)
                 rec["load_s"] = load_s
@@ -493,6 +535,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         bar.close()
     res["targets"] = evaluate_targets(res)
+    res["loadavg_end"] = _loadavg()
     _write_json(json_path, res)
     print_table(res)
     try:

@@ -174,3 +174,28 @@ def test_camera_inside_and_near_plane(renderer, name, camera):
     # Tets crossing the near plane are intersected per fragment, not dropped.
     mesh = synthetic.cube(6)
     _compare(renderer, name, mesh, camera, _tf(mesh))
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_depth_extent_matches_reference_segments(renderer, parallel):
+    from tetvr.reference import ray_segments
+
+    mesh = synthetic.cube(3)
+    cam = Camera.fit(mesh, direction=(-0.4, -0.3, -1.0), parallel=parallel, zoom=1.3)
+    size = (64, 48)
+    front, back = renderer.depth_extent(mesh, cam, size=size)
+    seg = ray_segments(mesh, cam, size)
+    want_front = np.full(size[0] * size[1], np.inf)
+    want_back = np.full(size[0] * size[1], -np.inf)
+    np.minimum.at(want_front, seg.pixel, seg.t_in)
+    np.maximum.at(want_back, seg.pixel, seg.t_out)
+    want_front = want_front.reshape(size[1], size[0])
+    want_back = want_back.reshape(size[1], size[0])
+    covered = np.isfinite(want_front)
+    assert covered.mean() > 0.2
+    # Coverage agrees except where a pixel centre grazes the silhouette.
+    assert np.mean(np.isfinite(front) == covered) > 0.99
+    both = covered & np.isfinite(front)
+    scale = cam.clipping_range[1]
+    assert np.abs(front[both] - want_front[both]).max() < 1e-4 * scale
+    assert np.abs(back[both] - want_back[both]).max() < 1e-4 * scale

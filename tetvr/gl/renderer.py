@@ -78,9 +78,8 @@ class Renderer:
         self._order: Any = None
         self._table: PreintegrationTable | None = None
         self._table_tex: Any = None
-        self._fbo: Any = None
-        self._fbo_tex: Any = None
-        self._fbo_size: tuple[int, int] = (0, 0)
+        self._targets: dict[tuple[tuple[int, int], int], Any] = {}
+        self._clock = _Clock(self.ctx, False)
         self._vaos: dict[int, Any] = {}
         self.last_stats = FrameStats()
         self._released = False
@@ -101,7 +100,8 @@ class Renderer:
         self._programs.clear()
         self._vaos.clear()
         self._mesh_buffers = []
-        self._fans = self._order = self._table_tex = self._fbo = self._fbo_tex = None
+        self._targets.clear()
+        self._fans = self._order = self._table_tex = None
         self._mesh = None
         self._table = None
         self.ctx.release()
@@ -109,7 +109,9 @@ class Renderer:
 
     def _gl_objects(self) -> list[Any]:
         objs = [*self._vaos.values(), *self._programs.values(), *self._mesh_buffers]
-        objs += [o for o in (self._fans, self._order, self._table_tex, self._fbo, self._fbo_tex) if o is not None]
+        objs += [o for o in (self._fans, self._order, self._table_tex) if o is not None]
+        for fbo in self._targets.values():
+            objs += [fbo, *fbo.color_attachments]
         return objs
 
     # ---- programs ----
@@ -120,7 +122,8 @@ class Renderer:
             return prog
         stages = {"classify": {"compute_shader": "classify.comp"},
                   "tet": {"vertex_shader": "tet.vert", "fragment_shader": "tet.frag"},
-                  "floor": {"vertex_shader": "tet.vert", "fragment_shader": "floor.frag"}}[kind]
+                  "floor": {"vertex_shader": "tet.vert", "fragment_shader": "floor.frag"},
+                  "depth": {"vertex_shader": "tet.vert", "fragment_shader": "depth.frag"}}[kind]
         sources: dict[str, str] = {}
         all_files: list[str] = []
         try:
@@ -175,19 +178,24 @@ class Renderer:
         self._table_tex = tex
         self._table = table
 
-    def _use_target(self, size: tuple[int, int]) -> None:
-        if self._fbo is not None and self._fbo_size == size:
-            return
-        if self._fbo is not None:
+    def _use_target(self, size: tuple[int, int], components: int) -> Any:
+        """The float framebuffer of this size and channel count (made once, then reused)."""
+        key = (size, components)
+        fbo = self._targets.get(key)
+        if fbo is not None:
+            return fbo
+        if len(self._targets) >= 4:
             # Bind the default framebuffer first: deleting the bound one leaves GL pointing
             # at a dead name, and the next framebuffer's creation reports INVALID_OPERATION.
             self.ctx.detect_framebuffer(0).use()
-        for o in (self._fbo, self._fbo_tex):
-            if o is not None:
-                o.release()
-        self._fbo_tex = self.ctx.texture(size, 4, dtype="f4")
-        self._fbo = self.ctx.framebuffer(color_attachments=[self._fbo_tex])
-        self._fbo_size = size
+            for old in self._targets.values():
+                tex = old.color_attachments[0]
+                old.release()
+                tex.release()
+            self._targets.clear()
+        tex = self.ctx.texture(size, components, dtype="f4")
+        fbo = self._targets[key] = self.ctx.framebuffer(color_attachments=[tex])
+        return fbo
 
     # ---- the frame ----
     def table(self, mesh: TetMesh, tf: TransferFunction) -> PreintegrationTable:
@@ -196,6 +204,60 @@ class Renderer:
         return table_for(tf, mesh.scalar_range, mesh.max_edge, n_bins=s.table_scalar_bins,
                          n_slices=s.table_thickness_slices, log_base=s.table_log_base,
                          encoding=s.table_encoding, dtype=s.table_dtype)
+
+    def _classify(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> dict[str, Any]:
+        """Upload the mesh if new and run the classification; returns the view uniforms."""
+        self._use_mesh(mesh)
+        self._clock.lap("upload")
+        view = camera.view_matrix()
+        view[:3, 3] += view[:3, :3] @ self._centre  # the buffers hold points minus the centre
+        near, far = camera.clipping_range
+        uniforms = dict(u_view=view, u_proj=camera.projection_matrix(size[0] / size[1]),
+                        u_perspective=0 if camera.parallel_projection else 1, u_near=near, u_far=far,
+                        u_viewport=(float(size[0]), float(size[1])))
+        classify = self._program("classify")
+        _set(classify, u_count=mesh.n_tets, **uniforms)
+        self._mesh_buffers[0].bind_to_storage_buffer(0)
+        self._mesh_buffers[1].bind_to_storage_buffer(1)
+        self._fans.bind_to_storage_buffer(2)
+        groups = (mesh.n_tets + _GROUP - 1) // _GROUP
+        for first in range(0, groups, _MAX_GROUPS):
+            _set(classify, u_offset=first * _GROUP)
+            classify.run(min(_MAX_GROUPS, groups - first))
+        self._clock.lap("classify")
+        return uniforms
+
+    def _draw(self, prog: Any, fbo: Any, n_tets: int, blend: tuple[Any, ...]) -> None:
+        import moderngl
+
+        fbo.use()
+        self.ctx.memory_barrier()
+        self._fans.bind_to_storage_buffer(2)
+        self._order.bind_to_storage_buffer(3)
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        self.ctx.enable(moderngl.BLEND)
+        self.ctx.blend_func, self.ctx.blend_equation = blend
+        vao = self._vaos.get(id(prog))
+        if vao is None:
+            vao = self._vaos[id(prog)] = self.ctx.vertex_array(prog, [])
+        vao.render(moderngl.TRIANGLES, vertices=12 * n_tets)
+        self.ctx.disable(moderngl.BLEND)
+        self._clock.lap("draw")
+
+    def _read(self, fbo: Any, size: tuple[int, int], components: int) -> NDArray[np.float32]:
+        raw = fbo.read(components=components, dtype="f4")
+        image = np.frombuffer(raw, dtype=np.float32).reshape(size[1], size[0], components)[::-1].copy()
+        self._clock.lap("readback")
+        err = self.ctx.error
+        if err != "GL_NO_ERROR":
+            raise RuntimeError(f"OpenGL error after rendering: {err}")
+        return image
+
+    def _check(self, size: tuple[int, int]) -> tuple[int, int]:
+        if self._released:
+            raise RuntimeError("this Renderer has been released")
+        self._clock = _Clock(self.ctx, self.profile)
+        return _check_size(size, self.ctx)
 
     def render(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, *, size: tuple[int, int] = (512, 512),
                order: NDArray[np.integer[Any]] | None = None, shader: str = "tet") -> NDArray[np.float32]:
@@ -212,78 +274,61 @@ class Renderer:
         -------
         (height, width, 4) float32 premultiplied RGBA, row 0 at the top.
         """
-        if self._released:
-            raise RuntimeError("this Renderer has been released")
-        width, height = _check_size(size, self.ctx)
-        s = self.settings
-        clock = _Clock(self.ctx, self.profile)
+        import moderngl
 
-        self._use_mesh(mesh)
-        clock.lap("upload")
+        size = self._check(size)
         table = self.table(mesh, tf)
         self._use_table(table)
-        clock.lap("table")
-
-        view = camera.view_matrix()
-        view[:3, 3] += view[:3, :3] @ self._centre  # the buffers hold points minus the centre
-        proj = camera.projection_matrix(width / height)
-        persp = 0 if camera.parallel_projection else 1
-
-        classify = self._program("classify")
-        near, far = camera.clipping_range
-        _set(classify, u_view=view, u_proj=proj, u_perspective=persp, u_near=near, u_count=mesh.n_tets)
-        self._mesh_buffers[0].bind_to_storage_buffer(0)
-        self._mesh_buffers[1].bind_to_storage_buffer(1)
-        self._fans.bind_to_storage_buffer(2)
-        groups = (mesh.n_tets + _GROUP - 1) // _GROUP
-        for first in range(0, groups, _MAX_GROUPS):
-            _set(classify, u_offset=first * _GROUP)
-            classify.run(min(_MAX_GROUPS, groups - first))
-        clock.lap("classify")
-
+        self._clock.lap("table")
+        uniforms = self._classify(mesh, camera, size)
         if order is None:
-            order_ids = visibility_order(mesh, camera, s.sort)
+            order_ids = visibility_order(mesh, camera, self.settings.sort)
         else:
             order_ids = np.asarray(order)
             if order_ids.shape != (mesh.n_tets,):
                 raise ValueError(f"order must list all {mesh.n_tets} cells once, got shape {order_ids.shape}")
-        clock.lap("sort")
+        self._clock.lap("sort")
         self._order.write(np.ascontiguousarray(order_ids, dtype=np.uint32).tobytes())
-        clock.lap("order_upload")
+        self._clock.lap("order_upload")
 
-        prog = self._program(shader, PERSPECTIVE_CORRECT=int(s.perspective_correct),
+        prog = self._program(shader, PERSPECTIVE_CORRECT=int(self.settings.perspective_correct),
                              TABLE_NORMALIZED=int(table.encoding == "normalized"))
-        _set(prog, u_view=view, u_proj=proj, u_perspective=persp, u_near=near, u_far=far,
-             u_viewport=(float(width), float(height)), u_scalar_range=table.scalar_range, u_d_min=table.d_min,
+        _set(prog, u_scalar_range=table.scalar_range, u_d_min=table.d_min,
              u_inv_log_base=1.0 / np.log(table.log_base), u_alpha_scale=table.alpha_scale,
-             u_table_size=(table.n_bins, table.n_bins, table.n_slices + 1), u_table=0)
-        self._use_target((width, height))
-        self._fbo.use()
-        self._fbo.clear(0.0, 0.0, 0.0, 0.0)
-        self.ctx.memory_barrier()
+             u_table_size=(table.n_bins, table.n_bins, table.n_slices + 1), u_table=0, **uniforms)
         self._table_tex.use(0)
-        self._fans.bind_to_storage_buffer(2)
-        self._order.bind_to_storage_buffer(3)
+        fbo = self._use_target(size, 4)
+        fbo.use()
+        fbo.clear(0.0, 0.0, 0.0, 0.0)
+        self._draw(prog, fbo, mesh.n_tets, ((moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA), moderngl.FUNC_ADD))
+        image = self._read(fbo, size, 4)
+        self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, **self._clock.laps)
+        return image
+
+    def depth_extent(self, mesh: TetMesh, camera: Camera, *, size: tuple[int, int] = (512, 512)
+                     ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """Per pixel, the eye depth of the mesh's nearest entry and farthest exit.
+
+        Returns ``(front, back)``, each (height, width) float32, clipped to the camera's
+        clipping range; ``+inf`` / ``-inf`` where no tet covers the pixel. These are the ray
+        limits for fusing the mesh with a ray-cast volume (:mod:`tetvr.fuse`).
+        """
         import moderngl
 
-        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
-        self.ctx.enable(moderngl.BLEND)
-        self.ctx.blend_func = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
-        self.ctx.blend_equation = moderngl.FUNC_ADD
-        vao = self._vaos.get(id(prog))
-        if vao is None:
-            vao = self._vaos[id(prog)] = self.ctx.vertex_array(prog, [])
-        vao.render(moderngl.TRIANGLES, vertices=12 * mesh.n_tets)
-        self.ctx.disable(moderngl.BLEND)
-        clock.lap("draw")
-        raw = self._fbo.read(components=4, dtype="f4")
-        image = np.frombuffer(raw, dtype=np.float32).reshape(height, width, 4)[::-1].copy()
-        clock.lap("readback")
-        err = self.ctx.error
-        if err != "GL_NO_ERROR":
-            raise RuntimeError(f"OpenGL error after rendering: {err}")
-        self.last_stats = FrameStats(n_tets=mesh.n_tets, size=(width, height), **clock.laps)
-        return image
+        size = self._check(size)
+        uniforms = self._classify(mesh, camera, size)
+        # Any order will do: MIN blending is commutative.
+        self._order.write(np.arange(mesh.n_tets, dtype=np.uint32).tobytes())
+        prog = self._program("depth", PERSPECTIVE_CORRECT=int(self.settings.perspective_correct))
+        _set(prog, **uniforms)
+        fbo = self._use_target(size, 2)
+        fbo.use()
+        fbo.clear(3e38, 3e38, 0.0, 0.0)
+        self._draw(prog, fbo, mesh.n_tets, ((moderngl.ONE, moderngl.ONE), moderngl.MIN))
+        ext = self._read(fbo, size, 2)
+        front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)
+        back = np.where(ext[..., 1] >= 3e38, -np.inf, -ext[..., 1]).astype(np.float32)
+        return front, back
 
 
 def _check_size(size: tuple[int, int], ctx: Any) -> tuple[int, int]:
