@@ -175,12 +175,16 @@ def _mesh_specs(quick: bool, data_dir: Path) -> tuple[list[tuple[str, int, Calla
 
 # ---------------------------------------------------------------- measurements
 def _frame(renderer: Any, mesh: TetMesh, cam: Camera, tf: Any, shader: str) -> tuple[dict[str, float], float, np.ndarray]:
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     image = renderer.render(mesh, cam, tf, size=SIZE, shader=shader)
     wall = time.perf_counter() - t0
     st = renderer.last_stats
     stages = {k: float(getattr(st, k)) for k in ("upload", "table", *VIEW_STAGES)}
     stages["total"] = sum(stages[k] for k in VIEW_STAGES)
+    # CPU seconds of the whole process (llvmpipe's raster threads included). On a software
+    # rasteriser this is the work done; wall time also counts waiting for cores that other
+    # processes hold, so cpu / wall well below the core count flags a contended run.
+    stages["cpu"] = time.process_time() - c0
     return stages, wall, image
 
 
@@ -228,7 +232,7 @@ def bench_mesh(renderer: Any, name: str, mesh: TetMesh, repeats: int, bar: tqdm)
     # (The next mesh's first frame resizes the target back; it is not in any median.)
 
     def medians(rows: list[dict[str, float]]) -> dict[str, float]:
-        return {k: _median([r[k] for r in rows]) for k in ("table", *VIEW_STAGES, "total")}
+        return {k: _median([r[k] for r in rows]) for k in ("table", *VIEW_STAGES, "total", "cpu")}
 
     rec["median"] = medians(samples["tet"])
     rec["floor_median"] = medians(samples["floor"])
@@ -240,7 +244,8 @@ def bench_mesh(renderer: Any, name: str, mesh: TetMesh, repeats: int, bar: tqdm)
     # Each repeat pairs a tet frame with a floor frame rendered right after it; the median
     # of the per-pair ratios is less sensitive to load that drifts during the run.
     rec["ratio_paired"] = {k: _median([t[k] / f[k] for t, f in zip(samples["tet"], samples["floor"])])
-                           for k in ("draw", "total")}
+                           for k in ("draw", "total", "cpu")}
+    rec["cpu_utilisation"] = {k: _median([r["cpu"] / w for r, w in zip(samples[k], walls[k])]) for k in ("tet", "floor")}
     rec["geometry_floor_draw"] = _median(geometry)
     rec["samples"] = {"tet": samples["tet"], "floor": samples["floor"], "wall": walls, "geometry_floor_draw": geometry}
     return rec
@@ -304,10 +309,11 @@ def print_table(res: dict[str, Any]) -> None:
     meshes = res.get("meshes", [])
     if meshes:
         head = (f"{'mesh':<20}{'tets':>9}{'R':>3} | {'upload':>7}{'table':>7} | {'classify':>8}{'sort':>7}"
-                f"{'order':>7}{'draw':>8}{'readbk':>7}{'total':>8} | {'floor':>7}{'draw/fl':>8}{'tot/fl':>7}{'geom':>7} | {'wall':>7}")
+                f"{'order':>7}{'draw':>8}{'readbk':>7}{'total':>8} | {'floor':>7}{'draw/fl':>8}{'tot/fl':>7}{'cpu/fl':>7}{'geom':>7} | {'wall':>7}{'util':>5}")
         print(f"\nper-view stage medians at {SIZE[0]}x{SIZE[1]}, ms.  upload/table: first frame only; floor: total of "
               f"the floor shader;\ngeom: floor draw at {GEOMETRY_SIZE[0]}x{GEOMETRY_SIZE[1]} (no fill); "
-              "wall: whole render() with profile=False")
+              "cpu/fl: process-CPU-time ratio tet/floor;\nwall: whole render() with profile=False; "
+              f"util: CPU s per wall s (cores busy for us; {os.cpu_count()} here)")
         print(head)
         print("-" * len(head))
         for m in meshes:
@@ -315,7 +321,8 @@ def print_table(res: dict[str, Any]) -> None:
             print(f"{m['name']:<20}{m['n_tets']:>9}{m['repeats']:>3} | {_ms(ff['upload']):>7}{_ms(ff['table']):>7} | "
                   f"{_ms(md['classify']):>8}{_ms(md['sort']):>7}{_ms(md['order_upload']):>7}{_ms(md['draw']):>8}"
                   f"{_ms(md['readback']):>7}{_ms(md['total']):>8} | {_ms(fl['total']):>7}{r['draw']:>8.2f}"
-                  f"{r['total']:>7.2f}{_ms(m['geometry_floor_draw']):>7} | {_ms(m['wall_median']['tet_unprofiled']):>7}")
+                  f"{r['total']:>7.2f}{m['ratio_paired']['cpu']:>7.2f}{_ms(m['geometry_floor_draw']):>7} | "
+                  f"{_ms(m['wall_median']['tet_unprofiled']):>7}{m['cpu_utilisation']['tet']:>5.1f}")
     tab = res.get("table")
     if tab:
         cells = ", ".join(f"{k}: {v['median']:.3f} s" for k, v in tab["by_bins"].items())
@@ -482,6 +489,8 @@ def main(argv: list[str] | None = None) -> int:
             "floor": "same mesh, camera and sort, shader='floor' (constant colour): the fill-rate floor",
             "wall_median.tet_unprofiled": "wall time of render() with profile=False (no per-stage glFinish)",
             "ratio": "median tet / median floor; ratio_paired: median of per-repeat tet / floor",
+            "cpu": "process CPU seconds of the frame (all threads; llvmpipe rasterises on the CPU)",
+            "cpu_utilisation": "median cpu / wall per frame; about the core count when nothing else competes",
             "geometry_floor_draw": f"draw stage of the floor shader at {GEOMETRY_SIZE}: the non-fill part of draw",
         },
     }

@@ -100,22 +100,32 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
     m = tets.shape[0]
     n_pts = pts.shape[0]
 
-    # (4m, 3) faces, slot-major within a tet: row 4*t + k is the face opposite vertex k.
-    faces = tets[:, FACE_VERTICES].reshape(-1, 3)
-    x, y, z = faces[:, 0], faces[:, 1], faces[:, 2]
-    lo = np.minimum(np.minimum(x, y), z)
-    hi = np.maximum(np.maximum(x, y), z)
-    mid = x + y + z - lo - hi
-
-    if n_pts <= 2_097_151:  # 3 * 21 bits fit an int64
-        key = (lo * n_pts + mid) * n_pts + hi
-        order = np.argsort(key)
-        ks = key[order]
+    # One int64 key per face (slot-major: entry 4*t + k is the face opposite vertex k),
+    # its vertex ids sorted, built column by column to avoid (4m, 3) temporaries.
+    cols = [tets[:, i] for i in range(4)]
+    wide = n_pts <= 2_097_151  # 3 * 21 bits fit an int64
+    key = np.empty((m, 4), dtype=np.int64)
+    sorted_faces = []
+    for k, (i, j, h) in enumerate(FACE_VERTICES):
+        x, y, z = cols[i], cols[j], cols[h]
+        lo = np.minimum(np.minimum(x, y), z)
+        hi = np.maximum(np.maximum(x, y), z)
+        mid = x + y + z - lo - hi
+        if wide:
+            key[:, k] = (lo * n_pts + mid) * n_pts + hi
+        else:  # pragma: no cover - meshes with more than two million points
+            sorted_faces.append((lo, mid, hi))
+    if wide:
+        flat_key = key.reshape(-1)
+        order = np.argsort(flat_key)
+        ks = flat_key[order]
         same = ks[1:] == ks[:-1]
-    else:  # pragma: no cover - meshes with more than two million points
+    else:  # pragma: no cover
+        lo, mid, hi = (np.stack([f[c] for f in sorted_faces], axis=1).reshape(-1) for c in range(3))
         order = np.lexsort((hi, mid, lo))
-        same = (lo[order][1:] == lo[order][:-1]) & (mid[order][1:] == mid[order][:-1]) & (
-            hi[order][1:] == hi[order][:-1])
+        lo, mid, hi = lo[order], mid[order], hi[order]
+        same = (lo[1:] == lo[:-1]) & (mid[1:] == mid[:-1]) & (hi[1:] == hi[:-1])
+    del key
 
     # A pair of equal neighbours is an interior face, unless the run of equal keys is
     # longer than two (a non-manifold face), which is left as boundary on every side.
@@ -138,9 +148,9 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
     cx, cy, cz = (np.ascontiguousarray(rel[:, i])[tets] for i in range(3))
     normals = np.empty((m, 4, 3))
     offsets = np.empty((m, 4))
-    for k, (i, j, l) in enumerate(FACE_VERTICES):
+    for k, (i, j, h) in enumerate(FACE_VERTICES):
         ux, uy, uz = cx[:, j] - cx[:, i], cy[:, j] - cy[:, i], cz[:, j] - cz[:, i]
-        vx, vy, vz = cx[:, l] - cx[:, i], cy[:, l] - cy[:, i], cz[:, l] - cz[:, i]
+        vx, vy, vz = cx[:, h] - cx[:, i], cy[:, h] - cy[:, i], cz[:, h] - cz[:, i]
         nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
         # Outward: the opposite vertex lies on the negative side of the plane.
         side = nx * (cx[:, k] - cx[:, i]) + ny * (cy[:, k] - cy[:, i]) + nz * (cz[:, k] - cz[:, i])
