@@ -29,17 +29,29 @@ void main() {
     vec2 p_ndc[4];
     float w[4];
     float s[4];
-    bool behind = false;
+    bool behind = false;   // some vertex nearer than the near plane
+    bool culled = true;    // every vertex nearer than the near plane
+    bool beyond = true;    // every vertex farther than the far plane
     for (int k = 0; k < 4; ++k) {
         vec4 p = points[id[k]];
         p_eye[k] = (u_view * vec4(p.xyz, 1.0)).xyz;
         vec4 clip = u_proj * vec4(p_eye[k], 1.0);
         w[k] = clip.w;
         behind = behind || -p_eye[k].z < u_near;
+        culled = culled && -p_eye[k].z < u_near;
+        beyond = beyond && -p_eye[k].z > u_far;
         p_ndc[k] = clip.xy / clip.w;
         s[k] = p.w;
     }
     TetFan fan;
+    if (culled || beyond) {
+        // Wholly outside the clipping range: nothing to draw.
+        fan.ids = ivec4(0, 0, 0, -2);
+        fan.front = vec4(0.0);
+        fan.back = vec4(0.0);
+        fans[t] = fan;
+        return;
+    }
     if (behind) {
         fan.ids = ivec4(-1 - t);
         fan.front = vec4(0.0);

@@ -11,7 +11,8 @@
 //   binding 3  Order   uint tet ids, back to front
 
 struct TetFan {
-    ivec4 ids;     // silhouette vertices in cyclic order; ids.w < 0 for a 3-vertex silhouette.
+    ivec4 ids;     // silhouette vertices in cyclic order; ids.w == -1 for a 3-vertex silhouette,
+                   // ids.w == -2 if the tet lies wholly outside the clipping range.
                    // ids.x < 0: the tet crosses the near plane (or the eye plane), where its
                    // projection is unbounded: it is drawn as a full-screen quad whose
                    // fragments intersect their ray with the tet exactly (tet id = -1 - ids.x).

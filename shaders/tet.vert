@@ -28,6 +28,11 @@ void main() {
     TetFan fan = fans[tet];
     int count = fan.ids.w < 0 ? 3 : 4;
     v_exact_tet = -1;
+    if (fan.ids.w == -2) {
+        gl_Position = vec4(2.0, 2.0, 0.0, 1.0);
+        v_front = vec4(0.0); v_back = vec4(0.0); v_scalar = vec2(0.0);
+        return;
+    }
     if (fan.ids.x < 0) {
         // Crosses the near plane: a full-screen quad (corners 0-5), the rest degenerate.
         const vec2 quad[6] = vec2[6](vec2(-1, -1), vec2(1, -1), vec2(1, 1), vec2(-1, -1), vec2(1, 1), vec2(-1, 1));

@@ -319,6 +319,11 @@ def test_kuhn_cubes_axis_view_rays_in_shared_faces_counted_once():
     depth = np.bincount(seg.pixel, weights=seg.t_out - seg.t_in, minlength=size[0] * size[1])
     inside = (np.abs(x) < 1) & (np.abs(y) < 1)
     np.testing.assert_allclose(depth[inside], 2.0, rtol=0, atol=1e-13)
+    # Many of these rays pass through vertices, where rounding could carry the end scalars
+    # past the vertex values: they must not.
+    for s in (seg.scalar_in, seg.scalar_out):
+        vertex_s = mesh.scalars[mesh.tets[seg.tet]]
+        assert np.all((s >= vertex_s.min(axis=1)) & (s <= vertex_s.max(axis=1)))
 
 
 def _raw_permuted(mesh: TetMesh, rng) -> TetMesh:
@@ -363,6 +368,21 @@ def test_jittered_grid_is_watertight(parallel, permuted):
         np.testing.assert_allclose(s, _linear_field(x), rtol=0, atol=1e-12)
         vertex_s = mesh.scalars[mesh.tets[seg.tet]]
         assert np.all((s >= vertex_s.min(axis=1)) & (s <= vertex_s.max(axis=1)))
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_sliver_tet_end_scalars_stay_in_vertex_range(parallel):
+    """A flat tet has a steep gradient, so rounding at a face would push the scalar past
+    the vertex values (by ~1e-12 here); the ends must be clamped to them."""
+    rng = np.random.default_rng(0)
+    rotation = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    p = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.3, 1e-5]]) @ rotation.T + 0.1
+    mesh = TetMesh.from_arrays(p, [[0, 1, 2, 3]], [0.2, 0.2, 0.2, 0.7])
+    seg = ray_segments(mesh, oblique_camera(target=tuple(p.mean(axis=0)), distance=2.5, parallel=parallel), (64, 64))
+    assert seg.pixel.size > 100
+    ends = np.r_[seg.scalar_in, seg.scalar_out]
+    assert ends.min() >= 0.2 and ends.max() <= 0.7
+    assert np.count_nonzero(ends == 0.2) > 20  # the base face is hit, at its value exactly
 
 
 # ---------------------------------------------------------------- (e) invariance

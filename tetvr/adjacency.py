@@ -48,6 +48,8 @@ class FaceAdjacency:
     Attributes
     ----------
     neighbors : (m, 4) int32, the tet across each face, -1 on the boundary.
+    mates : (m, 4) int32, the same face as a slot of that neighbour, as the flat index
+        ``4 * neighbor + k`` (so ``mates // 4`` is ``neighbors``), -1 on the boundary.
     normals : (m, 4, 3) float64, outward unit normal of each face.
     offsets : (m, 4) float64, ``normals . (x - origin)`` for any point ``x`` of the face.
     origin : (3,) float64, centre of the mesh's bounding box.
@@ -61,11 +63,12 @@ class FaceAdjacency:
     --------
     >>> from tetvr import synthetic
     >>> adj = face_adjacency(synthetic.two_tets())
-    >>> adj.neighbors[:, 3].tolist(), adj.n_interior_faces
-    ([1, 0], 1)
+    >>> adj.neighbors[:, 3].tolist(), adj.mates[:, 3].tolist(), adj.n_interior_faces
+    ([1, 0], [7, 3], 1)
     """
 
     neighbors: NDArray[np.int32]
+    mates: NDArray[np.int32]
     normals: NDArray[np.float64]
     offsets: NDArray[np.float64]
     origin: NDArray[np.float64]
@@ -99,6 +102,8 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
     pts = np.asarray(mesh.points, dtype=np.float64)
     m = tets.shape[0]
     n_pts = pts.shape[0]
+    if 4 * m > np.iinfo(np.int32).max:  # pragma: no cover - flat slot ids are int32
+        raise ValueError(f"face adjacency supports up to {np.iinfo(np.int32).max // 4} tets, got {m}")
 
     # One int64 key per face (slot-major: entry 4*t + k is the face opposite vertex k),
     # its vertex ids sorted, built column by column to avoid (4m, 3) temporaries.
@@ -136,9 +141,10 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
     first = np.flatnonzero(pair)
     p, q = order[first], order[first + 1]
 
-    nbr = np.full(4 * m, -1, dtype=np.int32)
-    nbr[p] = (q // 4).astype(np.int32)
-    nbr[q] = (p // 4).astype(np.int32)
+    mates = np.full(4 * m, -1, dtype=np.int32)
+    mates[p] = q
+    mates[q] = p
+    nbr = np.where(mates >= 0, mates // 4, -1).astype(np.int32)
 
     origin = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
     rel = pts - origin
@@ -174,11 +180,13 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
     cell_size = float(np.sqrt(np.median(longest)))
 
     neighbors = nbr.reshape(m, 4)
-    for arr in (neighbors, normals, offsets, origin):
+    mates = mates.reshape(m, 4)
+    for arr in (neighbors, mates, normals, offsets, origin):
         arr.setflags(write=False)
     n_interior = int(first.size)
     return FaceAdjacency(
         neighbors=neighbors,
+        mates=mates,
         normals=normals,
         offsets=offsets,
         origin=origin,

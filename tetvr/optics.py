@@ -33,6 +33,8 @@ scalar, and the scalar is linear along a ray inside a tetrahedron, so on such a 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -55,6 +57,8 @@ _GL_W = 0.5 * _GL_W
 _SUB_THETA = 0.5
 _THETA_CUT = 40.0
 _MAX_SUB = int(np.ceil(_THETA_CUT / _SUB_THETA))
+# Pieces are also cut where the transmittance per unit length, 1 - a, changes by 2x.
+_MAX_X_RATIO = 2.0
 
 Array = NDArray[np.float64]
 
@@ -113,12 +117,37 @@ def integrate_pieces(
 
     Notes
     -----
-    The optical depth is exact. The colour uses ``I = c0 - c1 T(L) + c' int T``, with
-    ``int T`` by 6-point Gauss–Legendre on sub-pieces of optical depth <= 1/2 (those past
-    optical depth 40 are dropped: their weight is below 4e-18). For a smooth ``T`` the
-    quadrature error per sub-piece is below 1e-9 of its length; measured against 20k-step
-    midpoint quadrature the whole is within 1e-7 (``tests/test_optics.py``).
+    The optical depth is exact. Pieces are first cut where ``1 - a`` changes by 2x (the
+    extinction is steep as ``a -> 1``); on each, the colour uses
+    ``I = c0 - c1 T(L) + c' int T``, with ``int T`` by 6-point Gauss–Legendre on
+    sub-pieces of optical depth <= 1/2 (those past optical depth 40 are dropped: their
+    weight is below 4e-18), and the cuts are composited front to back. Measured against
+    fine quadrature the colour is within 1e-9 (``tests/test_optics.py``).
     """
+    c0 = np.asarray(c0, dtype=np.float64)
+    c1 = np.asarray(c1, dtype=np.float64)
+    length = np.asarray(length, dtype=np.float64)
+    n = length.shape[0]
+    if n == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+    part, c_a, c_b, a_a, a_b, sub_len = _split_at_transmittance_ratio(
+        c0, c1, np.asarray(a0, dtype=np.float64), np.asarray(a1, dtype=np.float64), length)
+    rgb, theta = _integrate_smooth(c_a, c_b, a_a, a_b, sub_len, unit_distance)
+    if part.shape[0] == n:
+        return rgb, theta
+    # Composite the cuts of each piece front to back (they are contiguous, in ray order).
+    total = np.bincount(part, weights=theta, minlength=n)
+    before = np.cumsum(theta) - theta
+    start = np.cumsum(np.bincount(part, minlength=n)) - np.bincount(part, minlength=n)
+    w = np.exp(-(before - before[start][part]))
+    out = np.stack([np.bincount(part, weights=rgb[:, c] * w, minlength=n) for c in range(3)], axis=1)
+    return out, total
+
+
+def _integrate_smooth(
+    c0: Array, c1: Array, a0: Array, a1: Array, length: Array, unit_distance: float
+) -> tuple[Array, Array]:
+    """integrate_pieces for pieces on which 1 - a changes by at most 2x."""
     c0 = np.asarray(c0, dtype=np.float64)
     c1 = np.asarray(c1, dtype=np.float64)
     length = np.asarray(length, dtype=np.float64)
@@ -153,6 +182,51 @@ def integrate_pieces(
     rgb = c0 - c1 * t_end[:, None] + slope * int_t[:, None]
     # Zero-length or transparent pieces emit nothing; guard rounding to tiny negatives.
     return np.clip(rgb, 0.0, None), theta
+
+
+def _split_at_transmittance_ratio(
+    c0: Array, c1: Array, a0: Array, a1: Array, length: Array
+) -> tuple[NDArray[np.int64], Array, Array, Array, Array, Array]:
+    """Cut pieces so that ``1 - a`` changes by at most a factor _MAX_X_RATIO on each.
+
+    Sub-pieces cut only by optical depth meet ``tau = -ln(1 - a) / u``, whose derivative
+    ``a' / (1 - a)`` is huge where the opacity ramps towards 1: a piece with opacity
+    1 -> 0 was 4.5e-5 off in colour. Cutting at geometric steps of ``1 - a`` (opacity
+    still linear on every sub-piece, at most log2(1e6) = 20 cuts) brings that below 1e-10.
+
+    Returns, per sub-piece in ray order: index of its piece, front and back colour,
+    front and back opacity (clamped), length.
+    """
+    a0 = np.clip(a0, 0.0, MAX_OPACITY)
+    a1 = np.clip(a1, 0.0, MAX_OPACITY)
+    x0, x1 = 1.0 - a0, 1.0 - a1
+    n_cut = np.ceil(np.abs(np.log(x1 / x0)) / math.log(_MAX_X_RATIO) - 1e-9).astype(np.int64)
+    n_sub = np.maximum(n_cut, 1)
+    if np.all(n_sub == 1):
+        return np.arange(length.shape[0], dtype=np.int64), c0, c1, a0, a1, length
+    part = np.repeat(np.arange(length.shape[0], dtype=np.int64), n_sub)
+    j = np.arange(part.shape[0], dtype=np.int64) - np.repeat(np.cumsum(n_sub) - n_sub, n_sub)
+    ns = n_sub[part].astype(np.float64)
+    xa, xb = x0[part], x1[part]
+    same = xa == xb
+    ratio = xb / xa
+
+    def frac(q: Array) -> tuple[Array, Array]:
+        # Fraction along the piece where 1 - a = xa * ratio**q, and the opacity there.
+        x = xa * ratio**q
+        f = np.where(same, q, (x - xa) / np.where(same, 1.0, xb - xa))
+        return np.clip(f, 0.0, 1.0), 1.0 - x
+
+    f_lo, o_lo = frac(j / ns)
+    f_hi, o_hi = frac((j + 1) / ns)
+    # The ends keep their exact values.
+    first, last = j == 0, j == n_sub[part] - 1
+    f_lo, o_lo = np.where(first, 0.0, f_lo), np.where(first, a0[part], o_lo)
+    f_hi, o_hi = np.where(last, 1.0, f_hi), np.where(last, a1[part], o_hi)
+    dc = (c1 - c0)[part]
+    c_lo = c0[part] + dc * f_lo[:, None]
+    c_hi = c0[part] + dc * f_hi[:, None]
+    return part, c_lo, c_hi, o_lo, o_hi, (f_hi - f_lo) * length[part]
 
 
 def _frac_at_theta(

@@ -82,8 +82,6 @@ DEFAULT_CHUNK = 1 << 18
 _BOX_MARGIN_PX = 1e-6
 
 # Within a piece handed to integrate_pieces, 1 - opacity varies at most by this factor
-# (see _split_at_opacity_ratio).
-_MAX_X_RATIO = 2.0
 
 # Sub-pieces evaluated per integrate_pieces call: bounds its (n_sub, 6) temporaries.
 _SUB_BUDGET = 1 << 20
@@ -336,14 +334,18 @@ def _clip_chunk(geo: _TetGeometry, rays: _EyeRays, tets: Int, counts: Int, box_w
     del nx, ny, x, y
     in_plane = b == 0
     t = -a / np.where(in_plane, 1.0, b)
-    t_in = np.where(b < 0, t, -np.inf).max(axis=1)
-    t_out = np.where(b > 0, t, np.inf).min(axis=1)
+    enter = np.where(b < 0, t, -np.inf)
+    leave = np.where(b > 0, t, np.inf)
     del t
     outside = in_plane & ((a > 0) | ((a == 0) & geo.perturb_out[tet]))
-    np.maximum(t_in, rays.near, out=t_in)
-    np.minimum(t_out, rays.far, out=t_out)
-    keep = (t_out > t_in) & ~outside.any(axis=1)
-    del a, b, outside, in_plane
+    del a, b, in_plane
+    # Column by column: numpy reduces a short last axis slowly.
+    t_in = np.maximum(np.maximum(enter[:, 0], enter[:, 1]), np.maximum(enter[:, 2], rays.near))
+    np.maximum(t_in, enter[:, 3], out=t_in)
+    t_out = np.minimum(np.minimum(leave[:, 0], leave[:, 1]), np.minimum(leave[:, 2], rays.far))
+    np.minimum(t_out, leave[:, 3], out=t_out)
+    keep = (t_out > t_in) & ~(outside[:, 0] | outside[:, 1] | outside[:, 2] | outside[:, 3])
+    del enter, leave, outside
 
     tet, row, col, t_in, t_out = tet[keep], row[keep], col[keep], t_in[keep], t_out[keep]
     x = rays.x_col[col]
@@ -456,14 +458,14 @@ def integrate_segments(
     seg, s_a, s_b, piece_len = _split_at_breakpoints(s_in, s_out, length, tf.breakpoints)
     c_a, o_a = tf.evaluate(s_a)
     c_b, o_b = tf.evaluate(s_b)
-    part, c_a, c_b, o_a, o_b, piece_len = _split_at_opacity_ratio(c_a, c_b, o_a, o_b, piece_len)
-    seg = seg[part]
     rgb, theta = _integrate_batched(c_a, c_b, o_a, o_b, piece_len, tf.unit_distance)
     # Pieces are in ray order inside each segment, segments contiguous.
     excl = _exclusive_group_cumsum(theta, seg)
     w = np.exp(-excl)
-    seg_rgb = np.stack([np.bincount(seg, weights=rgb[:, c] * w, minlength=n) for c in range(3)], axis=1)
-    seg_theta = np.bincount(seg, weights=theta, minlength=n)
+    seg_rgb = np.empty((n, 3))
+    for c in range(3):
+        seg_rgb[:, c] = np.bincount(seg, weights=rgb[:, c] * w, minlength=n)
+    seg_theta = np.bincount(seg, weights=theta, minlength=n).astype(np.float64, copy=False)
     return seg_rgb, seg_theta
 
 
@@ -502,52 +504,6 @@ def _split_at_breakpoints(
     return seg, s_a, s_b, (f_b - f_a) * length[seg]
 
 
-def _split_at_opacity_ratio(
-    c0: Float, c1: Float, a0: Float, a1: Float, length: Float
-) -> tuple[Int, Float, Float, Float, Float, Float]:
-    """Cut pieces so that ``1 - a`` changes by at most a factor _MAX_X_RATIO on each.
-
-    integrate_pieces cuts pieces only by optical depth, but its Gauss-Legendre rule
-    meets ``tau = -ln(1 - a) / u``, whose derivative ``a' / (1 - a)`` is huge where the
-    opacity ramps towards 1: a piece with opacity 1 -> 0 was measured 4.5e-5 off in
-    colour. Cutting at geometric steps of ``1 - a`` (opacity still linear on every
-    sub-piece, at most log2(1e6) = 20 cuts) brings that below 1e-10.
-
-    Returns, per sub-piece in ray order: index of its piece, front and back colour,
-    front and back opacity (clamped as integrate_pieces would), length.
-    """
-    a0 = np.clip(a0, 0.0, MAX_OPACITY)
-    a1 = np.clip(a1, 0.0, MAX_OPACITY)
-    x0, x1 = 1.0 - a0, 1.0 - a1
-    n_cut = np.ceil(np.abs(np.log(x1 / x0)) / math.log(_MAX_X_RATIO) - 1e-9).astype(np.int64)
-    n_sub = np.maximum(n_cut, 1)
-    if np.all(n_sub == 1):
-        return np.arange(length.shape[0], dtype=np.int64), c0, c1, a0, a1, length
-    part = np.repeat(np.arange(length.shape[0], dtype=np.int64), n_sub)
-    j = np.arange(part.shape[0], dtype=np.int64) - np.repeat(np.cumsum(n_sub) - n_sub, n_sub)
-    ns = n_sub[part].astype(np.float64)
-    xa, xb = x0[part], x1[part]
-    same = xa == xb
-    ratio = xb / xa
-
-    def frac(q: Float) -> tuple[Float, Float]:
-        # Fraction along the piece where 1 - a = xa * ratio**q, and the opacity there.
-        x = xa * ratio**q
-        f = np.where(same, q, (x - xa) / np.where(same, 1.0, xb - xa))
-        return np.clip(f, 0.0, 1.0), 1.0 - x
-
-    f_lo, o_lo = frac(j / ns)
-    f_hi, o_hi = frac((j + 1) / ns)
-    # The ends keep their exact values.
-    first, last = j == 0, j == n_sub[part] - 1
-    f_lo, o_lo = np.where(first, 0.0, f_lo), np.where(first, a0[part], o_lo)
-    f_hi, o_hi = np.where(last, 1.0, f_hi), np.where(last, a1[part], o_hi)
-    dc = (c1 - c0)[part]
-    c_lo = c0[part] + dc * f_lo[:, None]
-    c_hi = c0[part] + dc * f_hi[:, None]
-    return part, c_lo, c_hi, o_lo, o_hi, (f_hi - f_lo) * length[part]
-
-
 def _integrate_batched(
     c0: Float, c1: Float, a0: Float, a1: Float, length: Float, u: float
 ) -> tuple[Float, Float]:
@@ -561,6 +517,7 @@ def _integrate_batched(
     rgb = np.zeros((n, 3))
     theta = np.zeros(n)
     est = piece_optical_depth(a0, a1, length, u)
+    # As integrate_pieces counts them (past optical depth 40 it drops the rest).
     n_sub = np.clip(np.ceil(np.minimum(est, 40.0) / _SUB_THETA), 1, None)
     for group in (np.nonzero(est <= _SUB_THETA)[0], np.nonzero(est > _SUB_THETA)[0]):
         ends = np.cumsum(n_sub[group])
@@ -578,15 +535,18 @@ def _exclusive_group_cumsum(values: Float, group: Int) -> Float:
     """Sum of the earlier values of the same group, for sorted (contiguous) groups.
 
     The running sum is reset at each group start rather than taken globally and
-    differenced, so its rounding error scales with one group's total, not the image's.
+    differenced, so its rounding error scales with one group's total, not the image's;
+    what rounding leaves at a group start is then removed, so each group starts at 0.
     """
     x = values.copy()
     if x.shape[0] == 0:
         return x
-    starts = np.nonzero(np.r_[True, group[1:] != group[:-1]])[0]
+    is_start = np.r_[True, group[1:] != group[:-1]]
+    starts = np.nonzero(is_start)[0]
     totals = np.add.reduceat(values, starts)
     x[starts[1:]] -= totals[:-1]
-    return np.cumsum(x) - values
+    run = np.cumsum(x) - values
+    return run - run[starts][np.cumsum(is_start) - 1]
 
 
 def composite(pixel: Int, t_in: Float, rgb: Float, theta: Float, n_pixels: int) -> Float:

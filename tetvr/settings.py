@@ -8,10 +8,12 @@ from typing import Any, Literal
 __all__ = ["RenderSettings", "SORT_METHODS", "TABLE_ENCODINGS", "TABLE_DTYPES"]
 
 #: Visibility orderings (see :mod:`tetvr.sort`).
-SORT_METHODS = ("centroid", "none")
+SORT_METHODS = ("centroid", "mpvo", "mpvonc", "none")
 #: How the pre-integration table is stored and looked up (see :mod:`tetvr.preintegrate`).
 TABLE_ENCODINGS = ("normalized", "premultiplied")
 TABLE_DTYPES = ("float32", "uint8")
+#: Storage of the compositing target.
+FRAMEBUFFERS = ("float32", "uint8")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -32,6 +34,8 @@ class RenderSettings:
         RGBA as in Kraus et al. 2004 and interpolates it linearly in log-thickness.
     perspective_correct : interpolate front/back scalars and thickness
         perspective-correctly (Kraus et al. 2004) rather than linearly in screen space.
+    framebuffer : ``"float32"`` compositing target, or ``"uint8"`` (what 8-bit
+        renderers such as VTK's do; for measuring what float compositing buys).
 
     Examples
     --------
@@ -39,19 +43,22 @@ class RenderSettings:
     128
     """
 
-    sort: Literal["centroid", "none"] = "centroid"
+    sort: Literal["centroid", "mpvo", "mpvonc", "none"] = "centroid"
     table_scalar_bins: int = 256
     table_thickness_slices: int = 16
     table_log_base: float = 2.0
     table_dtype: Literal["float32", "uint8"] = "float32"
     table_encoding: Literal["normalized", "premultiplied"] = "normalized"
     perspective_correct: bool = True
+    framebuffer: Literal["float32", "uint8"] = "float32"
 
     def __post_init__(self) -> None:
         if self.sort not in SORT_METHODS:
             raise ValueError(f"sort must be one of {SORT_METHODS}, got {self.sort!r}")
         if self.table_encoding not in TABLE_ENCODINGS:
             raise ValueError(f"table_encoding must be one of {TABLE_ENCODINGS}, got {self.table_encoding!r}")
+        if self.framebuffer not in FRAMEBUFFERS:
+            raise ValueError(f"framebuffer must be one of {FRAMEBUFFERS}, got {self.framebuffer!r}")
         if self.table_dtype not in TABLE_DTYPES:
             raise ValueError(f"table_dtype must be one of {TABLE_DTYPES}, got {self.table_dtype!r}")
         for name, lo, hi in (("table_scalar_bins", 2, 2048), ("table_thickness_slices", 1, 256)):

@@ -38,9 +38,9 @@ blocked), and cells that the graph does not relate come out back to front, as in
 centroid sort. Like Williams' heuristic this is not exact for every non-convex mesh.
 
 A cycle (possible in non-Delaunay meshes and in degenerate views) leaves cells that
-never become ready. It is broken by drawing one cell regardless: among the blocked cells
-reached so far, the one with the fewest undrawn cells behind it, then the farthest, then
-the lowest id. The number of breaks is reported in :class:`SortStats`
+never become ready. It is broken by drawing one cell of the cycle regardless: the one with
+the fewest undrawn cells behind it, then the farthest, then the lowest id (see
+:func:`_break_cycle`). The number of breaks is reported in :class:`SortStats`
 (:func:`sort_with_stats`); it is zero whenever the order satisfies every face constraint.
 
 Ties are broken by the cell's position in the mesh, which is canonical (see
@@ -132,16 +132,21 @@ class SortStats:
     n_cycle_breaks: int = 0
 
 
-def _eye_side(adj: FaceAdjacency, camera: Camera) -> NDArray[np.float64]:
-    """Signed side of every face plane, (m, 4): > 0 when the eye is outside the face.
+def _face_graph(adj: FaceAdjacency, camera: Camera) -> tuple[NDArray[np.int32], NDArray[np.bool_]]:
+    """The per-view face graph, as the successors of each cell and its ready slots.
 
-    Values within rounding of zero are set to exactly 0 (the face is seen edge-on).
+    Returns ``front`` and ``clear``, both (m, 4). ``front[t, k]`` is the neighbour across
+    face k, as the flat slot ``4 * neighbour + j`` of the same face (see
+    :attr:`FaceAdjacency.mates`), when that neighbour is in front of t (the eye is on its
+    side of the face), else -1. ``clear[t, k]`` is False while a cell behind t across
+    face k, which must be drawn first, is not drawn yet: True at the start for boundary
+    faces, faces toward the eye, and faces within rounding of the eye's plane (seen
+    edge-on, the two cells cannot overlap on screen, and no edge can make no cycle).
     """
     flat_n = adj.normals.reshape(-1, 3)
     if camera.parallel_projection:
-        # The eye at infinity behind the view direction: only the direction matters.
-        toward_eye = -np.asarray(camera.direction)
-        side = flat_n @ toward_eye
+        # The eye is at infinity against the view direction: only the direction matters.
+        side = flat_n @ -np.asarray(camera.direction)
         tol = 64.0 * np.finfo(np.float64).eps
     else:
         eye = np.asarray(camera.position) - adj.origin
@@ -149,8 +154,10 @@ def _eye_side(adj: FaceAdjacency, camera: Camera) -> NDArray[np.float64]:
         side -= adj.offsets.reshape(-1)
         # |normal| = 1 and |offset| <= radius, so this bounds the rounding error of the test.
         tol = 64.0 * np.finfo(np.float64).eps * (float(np.linalg.norm(eye)) + adj.radius)
-    side[np.abs(side) <= tol] = 0.0
-    return side.reshape(-1, 4)
+    side = side.reshape(-1, 4)
+    front = np.where(side > tol, adj.mates, -1)
+    clear = (side >= -tol) | (adj.mates < 0)
+    return front, clear
 
 
 def _depth(mesh: TetMesh, camera: Camera) -> NDArray[np.float64]:
@@ -161,6 +168,12 @@ def _depth(mesh: TetMesh, camera: Camera) -> NDArray[np.float64]:
     return np.sqrt(np.einsum("ij,ij->i", diff, diff))
 
 
+# The four bytes of a row of `clear` read as one uint32: all True.
+_ALL_CLEAR = np.frombuffer(b"\x01\x01\x01\x01", dtype=np.uint32)[0]
+_SHIFT = np.uint64(32)
+_LOW = np.uint64(0xFFFFFFFF)
+
+
 def _graph_order(mesh: TetMesh, camera: Camera, method: str, window: float) -> tuple[NDArray[np.uint32], SortStats]:
     """Kahn's topological sort of the face graph, one vectorised step per batch.
 
@@ -169,86 +182,100 @@ def _graph_order(mesh: TetMesh, camera: Camera, method: str, window: float) -> t
     """
     adj = face_adjacency(mesh)
     m = mesh.n_tets
-    side = _eye_side(adj, camera)
-    interior = adj.neighbors >= 0
-    # behind[t, k]: the neighbour across face k is behind t (the eye is on t's side of
-    # the face), so it must be drawn first. front[t, k]: t must be drawn first.
-    behind = (side < 0) & interior
-    front = (side > 0) & interior
-    n_constraints = int(np.count_nonzero(front))
-    n_edge_on = int(np.count_nonzero(interior)) // 2 - n_constraints
-    key = _depth(mesh, camera)
-    nbr = adj.neighbors
+    front, clear = _face_graph(adj, camera)
+    n_constraints = int(np.count_nonzero(front >= 0))
+    # Each cell's sort key packs its nearness (distance from the farthest cell, float32,
+    # whose bits order like the values since they are >= 0) above its id: one uint64
+    # sort then orders a batch farthest first, ties by id, with no argsort and no
+    # separate key array to carry along.
+    depth = _depth(mesh, camera)
+    near = (depth.max() - depth).astype(np.float32)
+    key = (near.view(np.uint32).astype(np.uint64) << _SHIFT) | np.arange(m, dtype=np.uint64)
 
-    # One extra slot so that the boundary marker -1 indexes a cell that counts as drawn.
-    drawn = np.zeros(m + 1, dtype=bool)
-    drawn[m] = True
+    # Readiness is per face slot, not a counter per cell: a drawn cell clears the slot of
+    # each successor that faces it. Every slot is hit once, so plain fancy assignment is
+    # exact where a counter would need the slow np.subtract.at for repeated cells.
+    clear_slots = clear.reshape(-1)
+    clear_rows = clear.view(np.uint32).reshape(-1)
+    drawn = np.zeros(m, dtype=bool)
     stamp = np.zeros(m, dtype=np.intp)
     order = np.empty(m, dtype=np.uint32)
-    ready = np.flatnonzero(~behind.any(axis=1))
-    n_sources = int(ready.size)
-    ready_key = key[ready]
+    sources = np.flatnonzero(clear_rows == _ALL_CLEAR)
+    ready = key[sources]
     blocked_seen: list[NDArray[np.intp]] = []
     pos = steps = breaks = 0
     while pos < m:
         if ready.size == 0:
-            cell, blocked_seen = _break_cycle(blocked_seen, drawn, behind, nbr, key)
+            cell, blocked_seen = _break_cycle(blocked_seen, drawn, clear, adj.neighbors, near)
             batch = np.array([cell], dtype=np.intp)
             breaks += 1
         else:
             if math.isfinite(window):
-                take = ready_key >= ready_key.max() - window
-                batch, batch_key = ready[take], ready_key[take]
-                ready, ready_key = ready[~take], ready_key[~take]
+                reach = np.float32(near[int(ready.min() & _LOW)] + window)
+                take = ready <= (np.uint64(reach.view(np.uint32)) << _SHIFT) | _LOW
+                batch_key, ready = ready[take], ready[~take]
             else:
-                batch, batch_key = ready, ready_key
-                ready = ready[:0]
-                ready_key = ready_key[:0]
-            batch = batch[np.lexsort((batch, -batch_key))]
+                batch_key, ready = ready, ready[:0]
+            batch = (np.sort(batch_key, kind="stable") & _LOW).astype(np.intp)
         steps += 1
         order[pos:pos + batch.size] = batch
         pos += batch.size
         drawn[batch] = True
-        # Cells in front of the batch; each is ready once nothing behind it is undrawn.
-        succ = nbr[batch][front[batch]].astype(np.intp)
-        if succ.size == 0:
+        slots = front[batch].reshape(-1)
+        slots = slots[slots >= 0]
+        if slots.size == 0:
             continue
-        succ = succ[~drawn[succ]]  # a cell drawn to break a cycle is done already
-        waiting = (behind[succ] & ~drawn[nbr[succ]]).any(axis=1)
-        new = succ[~waiting]
+        clear_slots[slots] = True
+        succ = slots >> 2
+        # A cell can be in front of several cells of the batch: keep one copy.
+        idx = np.arange(succ.size)
+        stamp[succ] = idx
+        succ = succ[stamp[succ] == idx]
+        done = clear_rows[succ] == _ALL_CLEAR
+        new = succ[done & ~drawn[succ]]  # a cell drawn to break a cycle is done already
         if new.size:
-            # A cell can follow several cells of the batch: keep one copy.
-            idx = np.arange(new.size)
-            stamp[new] = idx
-            new = new[stamp[new] == idx]
-            ready = np.concatenate((ready, new))
-            ready_key = np.concatenate((ready_key, key[new]))
-        if waiting.any():
-            blocked_seen.append(succ[waiting])
-    stats = SortStats(method=method, n_cells=m, n_steps=steps, n_sources=n_sources,
-                      n_constraints=n_constraints, n_edge_on=n_edge_on, n_cycle_breaks=breaks)
+            ready = np.concatenate((ready, key[new]))
+        if new.size < succ.size:
+            blocked_seen.append(succ[~done])
+    stats = SortStats(method=method, n_cells=m, n_steps=steps, n_sources=int(sources.size),
+                      n_constraints=n_constraints, n_edge_on=adj.n_interior_faces - n_constraints,
+                      n_cycle_breaks=breaks)
     return order, stats
 
 
 def _break_cycle(
     blocked_seen: list[NDArray[np.intp]],
     drawn: NDArray[np.bool_],
-    behind: NDArray[np.bool_],
-    nbr: NDArray[np.int32],
-    key: NDArray[np.float64],
+    clear: NDArray[np.bool_],
+    neighbors: NDArray[np.int32],
+    near: NDArray[np.float32],
 ) -> tuple[int, list[NDArray[np.intp]]]:
-    """The cell to draw next when no cell is ready: every undrawn cell waits on another.
+    """The cell to draw next when no cell is ready, i.e. every undrawn cell waits.
 
-    Candidates are the blocked cells reached so far (the rim of the cycle region), or all
-    undrawn cells when none was reached (a component with no source at all).
+    Every undrawn cell then has an undrawn cell behind it, so walking from cell to cell
+    behind must come back to a cell already visited: that closes a cycle. The cell drawn
+    is one on that cycle (not one merely waiting for it), the one with the fewest undrawn
+    cells behind it, then the farthest, then the lowest id. The walk starts from the
+    blocked cells reached so far (the rim of the drawn region), else from the first
+    undrawn cell (a component with no source at all). It is a Python loop, but cycles
+    are rare and short, and each step is one array lookup.
     """
     cand = np.unique(np.concatenate(blocked_seen)) if blocked_seen else np.empty(0, dtype=np.intp)
     cand = cand[~drawn[cand]]
-    if cand.size == 0:
-        cand = np.flatnonzero(~drawn[:-1])
-    undrawn_behind = (behind[cand] & ~drawn[nbr[cand]]).sum(axis=1)
-    pick = np.lexsort((cand, -key[cand], undrawn_behind))[0]
-    return int(cand[pick]), [cand]
+
+    def best(cells: NDArray[np.intp]) -> int:
+        waiting_on = 4 - np.count_nonzero(clear[cells], axis=1)
+        return int(cells[np.lexsort((cells, near[cells], waiting_on))[0]])
+
+    cur = best(cand) if cand.size else int(np.argmax(~drawn))
+    seen: dict[int, int] = {}
+    path: list[int] = []
+    while cur not in seen:
+        seen[cur] = len(path)
+        path.append(cur)
+        cur = int(neighbors[cur, np.argmin(clear[cur])])  # the first cell it waits on
+    cycle = np.array(path[seen[cur]:], dtype=np.intp)
+    return best(cycle), [cand]
 
 
 def mpvo_order(mesh: TetMesh, camera: Camera) -> tuple[NDArray[np.uint32], SortStats]:

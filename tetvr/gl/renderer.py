@@ -78,7 +78,7 @@ class Renderer:
         self._order: Any = None
         self._table: PreintegrationTable | None = None
         self._table_tex: Any = None
-        self._targets: dict[tuple[tuple[int, int], int], Any] = {}
+        self._targets: dict[tuple[tuple[int, int], int, str], Any] = {}
         self._clock = _Clock(self.ctx, False)
         self._vaos: dict[int, Any] = {}
         self.last_stats = FrameStats()
@@ -178,9 +178,9 @@ class Renderer:
         self._table_tex = tex
         self._table = table
 
-    def _use_target(self, size: tuple[int, int], components: int) -> Any:
-        """The float framebuffer of this size and channel count (made once, then reused)."""
-        key = (size, components)
+    def _use_target(self, size: tuple[int, int], components: int, dtype: str = "f4") -> Any:
+        """The framebuffer of this size, channel count and type (made once, then reused)."""
+        key = (size, components, dtype)
         fbo = self._targets.get(key)
         if fbo is not None:
             return fbo
@@ -193,7 +193,7 @@ class Renderer:
                 old.release()
                 tex.release()
             self._targets.clear()
-        tex = self.ctx.texture(size, components, dtype="f4")
+        tex = self.ctx.texture(size, components, dtype=dtype)
         fbo = self._targets[key] = self.ctx.framebuffer(color_attachments=[tex])
         return fbo
 
@@ -244,9 +244,13 @@ class Renderer:
         self.ctx.disable(moderngl.BLEND)
         self._clock.lap("draw")
 
-    def _read(self, fbo: Any, size: tuple[int, int], components: int) -> NDArray[np.float32]:
-        raw = fbo.read(components=components, dtype="f4")
-        image = np.frombuffer(raw, dtype=np.float32).reshape(size[1], size[0], components)[::-1].copy()
+    def _read(self, fbo: Any, size: tuple[int, int], components: int, dtype: str = "f4") -> NDArray[np.float32]:
+        raw = fbo.read(components=components, dtype=dtype)
+        if dtype == "f1":
+            flat = np.frombuffer(raw, dtype=np.uint8).astype(np.float32) / np.float32(255.0)
+        else:
+            flat = np.frombuffer(raw, dtype=np.float32)
+        image = flat.reshape(size[1], size[0], components)[::-1].copy()
         self._clock.lap("readback")
         err = self.ctx.error
         if err != "GL_NO_ERROR":
@@ -297,11 +301,12 @@ class Renderer:
              u_inv_log_base=1.0 / np.log(table.log_base), u_alpha_scale=table.alpha_scale,
              u_table_size=(table.n_bins, table.n_bins, table.n_slices + 1), u_table=0, **uniforms)
         self._table_tex.use(0)
-        fbo = self._use_target(size, 4)
+        fb_dtype = "f4" if self.settings.framebuffer == "float32" else "f1"
+        fbo = self._use_target(size, 4, fb_dtype)
         fbo.use()
         fbo.clear(0.0, 0.0, 0.0, 0.0)
         self._draw(prog, fbo, mesh.n_tets, ((moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA), moderngl.FUNC_ADD))
-        image = self._read(fbo, size, 4)
+        image = self._read(fbo, size, 4, fb_dtype)
         self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, **self._clock.laps)
         return image
 

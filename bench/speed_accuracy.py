@@ -1,0 +1,226 @@
+"""Speed against accuracy, method by method: a Pareto chart per scene.
+
+Every scene is rendered by the CPU reference once and by each method variant of the GPU
+renderer; for each variant we record the median frame time (per view change: classify,
+sort, draw, readback) and its error against the reference: RMSE and PSNR on premultiplied
+RGB, and the HAPT metrics (max error, mean error over covered pixels, % of covered pixels
+off by more than 1/255). The stability cases (tetvr.stability) are measured the same way.
+
+    python bench/speed_accuracy.py [--quick] [--size 256] [--out bench/results]
+
+Writes ``speed_accuracy.json`` and ``speed_accuracy.png`` (and one picture per scene of
+the default, the weakest variant and the reference).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import platform
+import statistics
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import tetvr  # noqa: E402
+from tetvr import Camera, RenderSettings, TransferFunction, synthetic  # noqa: E402
+from tetvr.reference import render_reference  # noqa: E402
+from tetvr.settings import SORT_METHODS  # noqa: E402
+from tetvr.sort import SORTERS  # noqa: E402
+from tetvr.stability import CASES, case  # noqa: E402
+
+SHARED = ROOT.parent / "shared" / "data" / "tets"
+DEFAULT = RenderSettings()
+
+
+def variants() -> dict[str, RenderSettings]:
+    v = {"default": DEFAULT}
+    v["screen-linear interpolation"] = dataclasses.replace(DEFAULT, perspective_correct=False)
+    v["premultiplied table"] = dataclasses.replace(DEFAULT, table_encoding="premultiplied")
+    v["uint8 table"] = dataclasses.replace(DEFAULT, table_dtype="uint8")
+    v["uint8 framebuffer"] = dataclasses.replace(DEFAULT, framebuffer="uint8")
+    for n in (64, 128, 512):
+        v[f"N={n}"] = dataclasses.replace(DEFAULT, table_scalar_bins=n)
+    for k, base in ((8, 4.0), (14, 2.2), (24, 1.6)):
+        v[f"K={k}, base {base}"] = dataclasses.replace(DEFAULT, table_thickness_slices=k, table_log_base=base)
+    for method in SORTERS:
+        if method != DEFAULT.sort and method in SORT_METHODS:
+            v[f"sort={method}"] = dataclasses.replace(DEFAULT, sort=method)
+    v["premultiplied, uint8, screen-linear (VTK-like)"] = dataclasses.replace(
+        DEFAULT, table_encoding="premultiplied", table_dtype="uint8", perspective_correct=False, framebuffer="uint8")
+    return v
+
+
+def _tf(mesh, opacity, units, preset="viridis"):
+    diag = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
+    return TransferFunction.preset(preset, mesh.scalar_range, opacity=opacity, unit_distance=diag / units)
+
+
+def scenes(quick: bool):
+    m = synthetic.cube(8)
+    yield "convex, close perspective", m, Camera.fit(m, direction=(-0.3, -0.2, -1.0), view_angle=60, zoom=1.6), \
+        _tf(m, [(0, 0.2), (0.5, 0.6), (1, 0.9)], 4)
+    r = synthetic.interlocking_rings(16, 1)
+    yield "interlocking rings", r, Camera.fit(r, direction=(-0.5, -1.0, -0.6), view_up=(0, 0, 1)), \
+        _tf(r, [(0, 0.9), (1, 0.9)], 6)
+    c = case("camera_inside")
+    yield "camera inside", c.mesh, c.camera, c.tf
+    for name, field in (("bluntfin_tets.vtu", "Density"), ("combustor_tets.vtu", "Density")):
+        if quick and name.startswith("combustor"):
+            continue
+        path = SHARED / name
+        if not path.is_file():
+            print(f"skipping {name}: {path} not found")
+            continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            mesh = tetvr.read(path, field)
+        lo, hi = mesh.scalar_range
+        q30, q60 = ((q - lo) / (hi - lo) for q in np.quantile(mesh.scalars, [0.3, 0.6]))
+        op = [(0, 0.02), (q30 - 0.03, 0.05), (q30, 0.9), (q30 + 0.03, 0.05), (q60, 0.3), (1, 0.9)]
+        yield name, mesh, Camera.fit(mesh, direction=(-1.0, -0.5, -0.7), zoom=1.2), _tf(mesh, op, 20, "cool-to-warm")
+
+
+def errors(img: np.ndarray, ref: np.ndarray) -> dict[str, float]:
+    d = np.abs(img[..., :3].astype(np.float64) - ref[..., :3]).max(axis=-1)
+    covered = (ref[..., 3] > 1e-4) | (img[..., 3] > 1e-4)
+    n = max(int(covered.sum()), 1)
+    return {"rmse": tetvr.rmse(img, ref), "psnr": min(tetvr.psnr(img, ref), 200.0),
+            "max_error": float(d.max()), "mean_error": float(d[covered].sum() / n),
+            "pct_over_1_255": float(100.0 * np.sum(d[covered] > 1 / 255) / n)}
+
+
+def time_frames(renderer, mesh, camera, tf, size, repeats):
+    renderer.render(mesh, camera, tf, size=size)  # warm-up: upload, table, programs
+    times = []
+    for _ in range(repeats):
+        img = renderer.render(mesh, camera, tf, size=size)
+        st = renderer.last_stats
+        times.append(st.classify + st.sort + st.order_upload + st.draw + st.readback)
+    return img, statistics.median(times)
+
+
+def pareto(points: list[tuple[float, float]]) -> list[bool]:
+    """True where no other point is both faster and more accurate (ties count as front)."""
+    return [not any((t2 <= t and e2 <= e) and (t2 < t or e2 < e) for t2, e2 in points) for t, e in points]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer repeats, skip the largest scene")
+    ap.add_argument("--size", type=int, default=256)
+    ap.add_argument("--out", default=str(ROOT / "bench" / "results"))
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    size = (args.size, args.size)
+    repeats = 2 if args.quick else 5
+    from tqdm import tqdm
+
+    vs = variants()
+    report = {"created": time.strftime("%Y-%m-%dT%H:%M:%S"), "size": size, "repeats": repeats,
+              "machine": {"platform": platform.platform(), "python": platform.python_version(), "numpy": np.__version__},
+              "variants": {k: dataclasses.asdict(s) for k, s in vs.items()}, "scenes": {}, "stability": {}}
+    renderers = {}
+    try:
+        for key, s in vs.items():
+            renderers[key] = tetvr.Renderer(s, profile=True)
+        report["gl"] = renderers["default"].gl_info
+        for name, mesh, cam, tf in scenes(args.quick):
+            t0 = time.perf_counter()
+            ref = render_reference(mesh, cam, tf, size)
+            ref_time = time.perf_counter() - t0
+            rows = {}
+            for key in tqdm(vs, desc=f"{name} ({mesh.n_tets} tets)", leave=False):
+                img, t = time_frames(renderers[key], mesh, cam, tf, size, repeats)
+                rows[key] = {"frame_s": t, **errors(img, ref)}
+                if key in ("default", "premultiplied, uint8, screen-linear (VTK-like)"):
+                    np.save(out / f"_tmp_{key[:7]}.npy", img)
+            front = pareto([(r["frame_s"], r["rmse"]) for r in rows.values()])
+            for (key, r), f in zip(rows.items(), front):
+                r["pareto"] = f
+            report["scenes"][name] = {"n_tets": mesh.n_tets, "reference_s": ref_time, "variants": rows}
+            _picture(out, name, ref)
+            d = rows["default"]
+            print(f"{name:28s} {mesh.n_tets:7d} tets  default {d['frame_s'] * 1e3:7.1f} ms  PSNR {d['psnr']:6.1f} dB  "
+                  f"pareto={d['pareto']}")
+        for name in tqdm(sorted(CASES), desc="stability cases", leave=False):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                c = case(name)
+            ref = render_reference(c.mesh, c.camera, c.tf, (96, 96))
+            report["stability"][name] = {
+                key: errors(renderers[key].render(c.mesh, c.camera, c.tf, size=(96, 96)), ref) for key in vs}
+    except KeyboardInterrupt:
+        print("interrupted: writing what was measured")
+    finally:
+        for r in renderers.values():
+            r.release()
+        for tmp in out.glob("_tmp_*.npy"):
+            tmp.unlink()
+    (out / "speed_accuracy.json").write_text(json.dumps(report, indent=1))
+    _chart(report, out / "speed_accuracy.png")
+    print(f"wrote {out / 'speed_accuracy.json'} and {out / 'speed_accuracy.png'}")
+    return 0
+
+
+def _picture(out: Path, name: str, ref: np.ndarray) -> None:
+    default = np.load(out / "_tmp_default.npy")
+    weak = np.load(out / "_tmp_premult.npy")
+    slug = "".join(ch if ch.isalnum() else "_" for ch in name)[:30]
+    tetvr.write_png(np.concatenate([default, weak, ref], axis=1), out / f"scene_{slug}.png", background=(0, 0, 0))
+
+
+def _chart(report: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scenes = report["scenes"]
+    if not scenes:
+        return
+    n = len(scenes)
+    cols = min(n, 3)
+    rows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(6.2 * cols, 4.8 * rows), squeeze=False)
+    names = list(report["variants"])
+    cmap = plt.get_cmap("tab20")
+    for ax, (scene, data) in zip(axes.flat, scenes.items()):
+        for i, key in enumerate(names):
+            r = data["variants"].get(key)
+            if r is None:
+                continue
+            marker = "*" if key == "default" else ("o" if r["pareto"] else "x")
+            ax.scatter(r["frame_s"] * 1e3, max(r["rmse"], 1e-7), s=160 if key == "default" else 45,
+                       color="black" if key == "default" else cmap(i % 20), marker=marker,
+                       label=key, zorder=3 if key == "default" else 2)
+        front = sorted((r["frame_s"] * 1e3, max(r["rmse"], 1e-7)) for r in data["variants"].values() if r["pareto"])
+        if front:
+            ax.plot(*zip(*front), color="grey", lw=1, ls="--", zorder=1)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("frame time per view change [ms]")
+        ax.set_ylabel("RMSE vs reference (premultiplied RGB)")
+        ax.set_title(f"{scene} ({data['n_tets']} tets)")
+        ax.grid(True, which="both", alpha=0.3)
+    for ax in list(axes.flat)[n:]:
+        ax.axis("off")
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
+    fig.suptitle(f"tetvr: speed vs accuracy at {report['size'][0]}x{report['size'][1]} "
+                 f"({report.get('gl', {}).get('GL_RENDERER', '?')}); * default, o Pareto front, x dominated")
+    fig.tight_layout(rect=(0, 0.08 + 0.02 * (len(names) // 4), 1, 0.96))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,441 @@
+"""The GPU volume ray caster: one object owns every GL object it makes.
+
+Per volume (once): the voxels go to a 3D texture, in their own precision (8/16-bit
+normalized or 32-bit float; never squeezed to 8 bits), downsampled with a warning when
+an axis exceeds the GPU's largest 3D texture. Per transfer function and step (once): the
+pre-integration table (:func:`tetvr.preintegrate.table_for`, whose top thickness slice is
+the step, so full steps are exact table entries and the partial steps at the ends of a
+ray read the thinner slices) and a 1D transfer-function texture. Per frame: the optional
+per-pixel ray limits go to a texture, one full-screen triangle runs ``raycast.frag``,
+and the RGBA32F target is read back.
+
+Modes are a table (:data:`MODES`): each maps to the ``RAYCAST_MODE`` define; every mode
+writes its final pixel from the shader, so none needs blending.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..camera import Camera
+from ..preintegrate import PreintegrationTable, table_for
+from ..raycast_reference import RAYCAST_MODES, RaycastSettings, normalize_ray_limits
+from ..transfer import TransferFunction
+from ..volume import Volume
+from .context import create_context, describe
+from .shaders import ShaderCompileError, assemble, explain
+
+__all__ = ["Raycaster", "RaycastStats", "MODES"]
+
+
+@dataclasses.dataclass(frozen=True)
+class _Mode:
+    """How a mode is drawn: its shader defines, what it reads, its blend state."""
+
+    defines: tuple[tuple[str, int], ...]
+    uses_table: bool
+    blend: None = None  # the fragment composites the whole ray itself
+
+
+#: Rendering mode -> shader variant (see :class:`~tetvr.raycast_reference.RaycastSettings`).
+MODES: dict[str, _Mode] = {
+    "emission_absorption": _Mode(defines=(("RAYCAST_MODE", 0),), uses_table=True),
+    "mip": _Mode(defines=(("RAYCAST_MODE", 1),), uses_table=False),
+    "xray": _Mode(defines=(("RAYCAST_MODE", 2),), uses_table=False),
+    "isosurface": _Mode(defines=(("RAYCAST_MODE", 3),), uses_table=False),
+}
+assert tuple(MODES) == RAYCAST_MODES
+
+# Volume dtype -> (moderngl texture dtype, factor that turns the texel back into the value).
+# Normalized formats keep 8/16-bit data exact at a quarter/half the memory of float32.
+_TEXTURE_FORMATS: dict[str, tuple[str, float]] = {
+    "uint8": ("f1", 255.0),
+    "int8": ("ni1", 127.0),
+    "uint16": ("nu2", 65535.0),
+    "int16": ("ni2", 32767.0),
+}
+
+_BIG = 3.0e38  # "unlimited" ray limits: finite, so no inf reaches the shader
+
+
+@dataclasses.dataclass(frozen=True)
+class RaycastStats:
+    """Size and stage times (seconds) of the last frame; times need ``profile=True``."""
+
+    size: tuple[int, int] = (0, 0)
+    volume_dims: tuple[int, int, int] = (0, 0, 0)
+    max_steps: int = 0
+    upload: float = 0.0
+    table: float = 0.0
+    draw: float = 0.0
+    readback: float = 0.0
+
+    @property
+    def total(self) -> float:
+        return self.upload + self.table + self.draw + self.readback
+
+
+class Raycaster:
+    """Renders image volumes on the GPU by ray casting; reuse one for many frames.
+
+    Parameters
+    ----------
+    settings : mode, step, termination, jitter, iso value, clip box, table sizes.
+    ctx : a moderngl context to draw in (e.g. the tets :class:`~tetvr.gl.Renderer`'s
+        ``ctx``); it is borrowed, not released. ``None`` creates and owns one.
+    max_texture_size : largest 3D texture side to use (default: the GPU's limit).
+    profile : wait for the GPU after each stage so :attr:`last_stats` holds stage times.
+
+    Examples
+    --------
+    >>> with Raycaster(RaycastSettings(mode="mip")) as rc:          # doctest: +SKIP
+    ...     image = rc.render(volume, camera, tf, size=(256, 256))
+    """
+
+    def __init__(self, settings: RaycastSettings | None = None, *, ctx: Any = None,
+                 max_texture_size: int | None = None, profile: bool = False) -> None:
+        self.settings = settings or RaycastSettings()
+        if not isinstance(self.settings, RaycastSettings):
+            raise TypeError(f"settings must be RaycastSettings, got {type(self.settings).__name__}")
+        self._owns_ctx = ctx is None
+        self.ctx: Any = create_context() if ctx is None else ctx
+        self.gl_info = describe(self.ctx)
+        gl_max = int(self.ctx.info.get("GL_MAX_3D_TEXTURE_SIZE", 2048))
+        if max_texture_size is not None and not (2 <= int(max_texture_size)):
+            raise ValueError(f"max_texture_size must be at least 2, got {max_texture_size!r}")
+        self.max_texture_size = min(gl_max, int(max_texture_size)) if max_texture_size is not None else gl_max
+        self.profile = profile
+        self._programs: dict[tuple[str, ...], Any] = {}
+        self._vaos: dict[int, Any] = {}
+        self._volume: Volume | None = None  # the caller's volume ...
+        self._gpu_volume: Volume | None = None  # ... and the one in the texture (maybe downsampled)
+        self._volume_tex: Any = None
+        self._value_scale = 1.0
+        self._table: PreintegrationTable | None = None
+        self._table_tex: Any = None
+        self._tf_key: tuple[Any, ...] | None = None
+        self._tf_tex: Any = None
+        self._limits_tex: Any = None
+        self._limits_size: tuple[int, int] = (0, 0)
+        self._no_limits_tex: Any = None
+        self._fbo: Any = None
+        self._fbo_tex: Any = None
+        self._fbo_size: tuple[int, int] = (0, 0)
+        self.last_stats = RaycastStats()
+        self._released = False
+
+    # ---- lifetime ----
+    def __enter__(self) -> "Raycaster":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+    def release(self) -> None:
+        """Release every GL object (and the context, if this object made it). Safe twice."""
+        if self._released:
+            return
+        with self.ctx:  # make this context current: another one may have been made since
+            if self._fbo is not None:
+                self.ctx.detect_framebuffer(0).use()
+            for obj in self._gl_objects():
+                obj.release()
+        self._programs.clear()
+        self._vaos.clear()
+        self._volume_tex = self._table_tex = self._tf_tex = self._limits_tex = None
+        self._no_limits_tex = self._fbo = self._fbo_tex = None
+        self._volume = self._gpu_volume = None
+        self._table = None
+        if self._owns_ctx:
+            self.ctx.release()
+        self._released = True
+
+    def _gl_objects(self) -> list[Any]:
+        objs = [*self._vaos.values(), *self._programs.values()]
+        objs += [o for o in (self._volume_tex, self._table_tex, self._tf_tex, self._limits_tex,
+                             self._no_limits_tex, self._fbo, self._fbo_tex) if o is not None]
+        return objs
+
+    # ---- programs ----
+    def _program(self, mode: str) -> Any:
+        spec = MODES[mode]
+        defines = dict(spec.defines)
+        defines["TABLE_NORMALIZED"] = 1
+        key = tuple(f"{k}={v}" for k, v in sorted(defines.items()))
+        prog = self._programs.get(key)
+        if prog is not None:
+            return prog
+        files: list[str] = []
+        try:
+            vert, _ = assemble("raycast.vert", defines)
+            frag, files = assemble("raycast.frag", defines)
+            prog = self.ctx.program(vertex_shader=vert, fragment_shader=frag)
+        except ShaderCompileError:
+            raise
+        except Exception as exc:
+            raise ShaderCompileError(f"raycast ({mode}): {explain(exc, files)}") from exc
+        self._programs[key] = prog
+        return prog
+
+    # ---- cached GPU state ----
+    def gpu_volume(self, volume: Volume) -> Volume:
+        """The volume as it is (or will be) on the GPU: ``volume``, or a downsampled copy
+        if an axis exceeds :attr:`max_texture_size` (warns once per volume)."""
+        if volume is self._volume and self._gpu_volume is not None:
+            return self._gpu_volume
+        return volume.fit_size(self.max_texture_size)
+
+    def _use_volume(self, volume: Volume) -> Volume:
+        if volume is self._volume and self._gpu_volume is not None:
+            return self._gpu_volume
+        import moderngl
+
+        gpu = volume.fit_size(self.max_texture_size)
+        if self._volume_tex is not None:
+            self._volume_tex.release()
+        fmt = _TEXTURE_FORMATS.get(gpu.data.dtype.name)
+        if fmt is None:
+            dtype, scale = "f4", 1.0
+            payload = np.ascontiguousarray(gpu.data, dtype=np.float32)
+        else:
+            dtype, scale = fmt
+            payload = gpu.data
+        tex = self.ctx.texture3d(gpu.dims, 1, payload.tobytes(), dtype=dtype)
+        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self._volume_tex = tex
+        self._value_scale = scale
+        self._volume, self._gpu_volume = volume, gpu
+        return gpu
+
+    def table(self, volume: Volume, tf: TransferFunction, settings: RaycastSettings | None = None) -> PreintegrationTable:
+        """The pre-integration table for a volume, transfer function and step.
+
+        Its last thickness slice is the step (to 1e-6), so a full step reads one table
+        entry; the partial steps where a ray enters and leaves read thinner slices.
+        """
+        s = settings or self.settings
+        return table_for(tf, volume.scalar_range, s.step_for(volume), n_bins=s.table_scalar_bins,
+                         n_slices=s.table_thickness_slices, log_base=2.0, encoding="normalized", dtype="float32")
+
+    def _use_table(self, table: PreintegrationTable) -> None:
+        if table is self._table:
+            return
+        import moderngl
+
+        if self._table_tex is not None:
+            self._table_tex.release()
+        k1, n, _, _ = table.data.shape
+        tex = self.ctx.texture3d((n, n, k1), 4, np.ascontiguousarray(table.data).tobytes(), dtype="f4")
+        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self._table_tex = tex
+        self._table = table
+
+    def _use_tf(self, tf: TransferFunction, scalar_range: tuple[float, float], n: int) -> None:
+        key = (tf, scalar_range, n)
+        if key == self._tf_key:
+            return
+        import moderngl
+
+        if self._tf_tex is not None:
+            self._tf_tex.release()
+        x = np.linspace(scalar_range[0], scalar_range[1], n)
+        rgb, a = tf.evaluate(x)
+        data = np.concatenate([rgb, a[:, None]], axis=1).astype(np.float32)
+        tex = self.ctx.texture((n, 1), 4, data.tobytes(), dtype="f4")
+        tex.repeat_x = tex.repeat_y = False
+        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self._tf_tex = tex
+        self._tf_key = key
+
+    def _use_limits(self, t_start: ArrayLike | None, t_end: ArrayLike | None, size: tuple[int, int]) -> bool:
+        import moderngl
+
+        if self._no_limits_tex is None:
+            self._no_limits_tex = self.ctx.texture((1, 1), 2, np.array([-_BIG, _BIG], np.float32).tobytes(), dtype="f4")
+            self._no_limits_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        if t_start is None and t_end is None:
+            return False
+        start, end = normalize_ray_limits(t_start, t_end, size)
+        lim = np.stack([np.clip(start, -_BIG, _BIG), np.clip(end, -_BIG, _BIG)], axis=-1)[::-1]  # GL rows go up
+        lim = np.ascontiguousarray(lim, dtype=np.float32)
+        if self._limits_tex is None or self._limits_size != size:
+            if self._limits_tex is not None:
+                self._limits_tex.release()
+            self._limits_tex = self.ctx.texture(size, 2, lim.tobytes(), dtype="f4")
+            self._limits_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._limits_size = size
+        else:
+            self._limits_tex.write(lim.tobytes())
+        return True
+
+    def _use_target(self, size: tuple[int, int]) -> None:
+        if self._fbo is not None and self._fbo_size == size:
+            return
+        if self._fbo is not None:
+            # Unbind before deleting (see Renderer._use_target).
+            self.ctx.detect_framebuffer(0).use()
+        for o in (self._fbo, self._fbo_tex):
+            if o is not None:
+                o.release()
+        self._fbo_tex = self.ctx.texture(size, 4, dtype="f4")
+        self._fbo = self.ctx.framebuffer(color_attachments=[self._fbo_tex])
+        self._fbo_size = size
+
+    # ---- the frame ----
+    def render(
+        self,
+        volume: Volume,
+        camera: Camera,
+        tf: TransferFunction,
+        *,
+        size: tuple[int, int] = (512, 512),
+        t_start: ArrayLike | None = None,
+        t_end: ArrayLike | None = None,
+        settings: RaycastSettings | None = None,
+    ) -> NDArray[np.float32]:
+        """Render one frame.
+
+        Parameters
+        ----------
+        volume, camera, tf : the scene.
+        size : (width, height) in pixels.
+        t_start, t_end : optional (H, W) float arrays of eye depth (row 0 at the top):
+            each ray is integrated only over ``[max(entry, t_start), min(exit, t_end)]``.
+            NaN or +-inf means unlimited.
+        settings : overrides :attr:`settings` for this frame.
+
+        Returns
+        -------
+        (height, width, 4) float32 premultiplied RGBA, row 0 at the top.
+        """
+        if self._released:
+            raise RuntimeError("this Raycaster has been released")
+        # Creating a context makes it current; enter ours so that every call below
+        # reaches it even when other contexts were created (or released) since.
+        with self.ctx:
+            return self._render(volume, camera, tf, size, t_start, t_end, settings)
+
+    def _render(self, volume: Volume, camera: Camera, tf: TransferFunction, size: tuple[int, int],
+                t_start: ArrayLike | None, t_end: ArrayLike | None, settings: RaycastSettings | None) -> NDArray[np.float32]:
+        if not isinstance(volume, Volume):
+            raise TypeError(f"volume must be a Volume, got {type(volume).__name__}")
+        if not isinstance(camera, Camera):
+            raise TypeError(f"camera must be a Camera, got {type(camera).__name__}")
+        if not isinstance(tf, TransferFunction):
+            raise TypeError(f"tf must be a TransferFunction, got {type(tf).__name__}")
+        s = settings or self.settings
+        width, height = _check_size(size, self.ctx)
+        clock = _Clock(self.ctx, self.profile)
+
+        gpu = self._use_volume(volume)
+        use_limits = self._use_limits(t_start, t_end, (width, height))
+        clock.lap("upload")
+        mode = MODES[s.mode]
+        table = self.table(volume, tf, s)  # range from the original volume: downsampling only narrows it
+        if mode.uses_table:
+            self._use_table(table)
+        self._use_tf(tf, table.scalar_range, s.tf_samples)
+        clock.lap("table")
+
+        step = s.step_for(volume)
+        max_steps = int(math.ceil(gpu.diagonal / step)) + 3
+        if max_steps > 1 << 20:
+            raise ValueError(f"step {step} is too small for a volume of diagonal {gpu.diagonal:.4g}: "
+                             f"{max_steps} steps per ray")
+        centre = gpu.center
+        eye_to_world = np.linalg.inv(camera.view_matrix())
+        to_local = np.eye(4)
+        to_local[:3, 3] = -centre
+        eye_to_local = to_local @ eye_to_world
+        eye_to_index = gpu.world_to_index @ eye_to_world
+        aspect = width / height
+        k = camera.parallel_scale if camera.parallel_projection else math.tan(math.radians(camera.view_angle) / 2)
+        a_inv = gpu.world_to_index[:3, :3]
+        clip_lo, clip_hi = (np.asarray(s.clip_box[0]) - centre, np.asarray(s.clip_box[1]) - centre) \
+            if s.clip_box is not None else (np.zeros(3), np.zeros(3))
+        lo, hi = table.scalar_range
+        prog = self._program(s.mode)
+        _set(prog,
+             u_inv_viewport=(1.0 / width, 1.0 / height), u_perspective=0 if camera.parallel_projection else 1,
+             u_k=(k * aspect, k), u_eye_to_index=eye_to_index, u_eye_to_local=eye_to_local,
+             u_box_hi=tuple(float(n - 1) for n in gpu.dims), u_clip_range=camera.clipping_range,
+             u_use_clip_box=int(s.clip_box is not None), u_clip_lo=tuple(clip_lo), u_clip_hi=tuple(clip_hi),
+             u_use_limits=int(use_limits), u_step=step, u_max_steps=max_steps,
+             u_termination=s.termination, u_jitter=int(s.jitter), u_seed=s.seed,
+             u_iso=s.iso_for(volume), u_iso_opacity=s.iso_opacity, u_shading=s.shading,
+             u_gradient_to_local=a_inv.T,
+             u_inv_dims=tuple(1.0 / n for n in gpu.dims), u_value_scale=self._value_scale, u_value_offset=0.0,
+             u_tf_size=float(s.tf_samples), u_scalar_range=(lo, hi), u_d_min=table.d_min,
+             u_inv_log_base=1.0 / np.log(table.log_base), u_alpha_scale=table.alpha_scale,
+             u_table_size=(table.n_bins, table.n_bins, table.n_slices + 1),
+             u_table=0, u_volume=1, u_tf=2, u_limits=3)
+        self._use_target((width, height))
+        self._fbo.use()
+        self._fbo.clear(0.0, 0.0, 0.0, 0.0)
+        import moderngl
+
+        if mode.uses_table and self._table_tex is not None:
+            self._table_tex.use(0)
+        self._volume_tex.use(1)
+        self._tf_tex.use(2)
+        (self._limits_tex if use_limits else self._no_limits_tex).use(3)
+        self.ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        vao = self._vaos.get(id(prog))
+        if vao is None:
+            vao = self._vaos[id(prog)] = self.ctx.vertex_array(prog, [])
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        clock.lap("draw")
+        raw = self._fbo.read(components=4, dtype="f4")
+        image = np.frombuffer(raw, dtype=np.float32).reshape(height, width, 4)[::-1].copy()
+        clock.lap("readback")
+        err = self.ctx.error
+        if err != "GL_NO_ERROR":
+            raise RuntimeError(f"OpenGL error after ray casting: {err}")
+        self.last_stats = RaycastStats(size=(width, height), volume_dims=gpu.dims, max_steps=max_steps, **clock.laps)
+        return image
+
+
+def _check_size(size: tuple[int, int], ctx: Any) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in size)
+    except (TypeError, ValueError):
+        raise ValueError(f"size must be (width, height), got {size!r}") from None
+    if (width, height) != tuple(size):
+        raise ValueError(f"size must be integers, got {size!r}")
+    limit = int(min(ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384), ctx.info.get("GL_MAX_VIEWPORT_DIMS", (16384,))[0]))
+    if not (1 <= width <= limit and 1 <= height <= limit):
+        raise ValueError(f"image size {size!r} is outside 1..{limit} pixels per side (the GL limit here)")
+    return width, height
+
+
+def _set(prog: Any, **uniforms: Any) -> None:
+    for name, value in uniforms.items():
+        if name not in prog:
+            continue  # optimised away by the compiler
+        arr = np.asarray(value) if isinstance(value, np.ndarray) else None
+        if arr is not None and arr.ndim == 2:
+            prog[name].write(arr.T.astype(np.float32).tobytes())  # GLSL is column-major
+        else:
+            prog[name].value = value
+
+
+class _Clock:
+    def __init__(self, ctx: Any, sync: bool) -> None:
+        self.ctx, self.sync = ctx, sync
+        self.laps: dict[str, float] = {}
+        self.t = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        if self.sync:
+            self.ctx.finish()
+        now = time.perf_counter()
+        self.laps[name] = self.laps.get(name, 0.0) + now - self.t
+        self.t = now
