@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
+import functools
 import json
 import os
 import platform
@@ -74,7 +75,7 @@ TABLE_REPEATS = 3
 SORT_N = 55  # cube(55): 998,250 tets
 SORT_REPEATS = 10
 
-TARGETS = {
+TARGETS: dict[str, dict[str, Any]] = {
     "sort_1m_s": {"limit": 0.050, "what": "centroid sort of ~1M tets <= 50 ms (median of 10, centroids cached)"},
     "table_256_s": {"limit": 2.0, "what": "256x256x16 float32 table build <= 2 s (median of 3, uncached)"},
     "frame_vs_floor": {"limit": 2.0, "what": "per-view frame total <= 2x the fill-rate floor's total, every mesh"},
@@ -151,7 +152,7 @@ def _mesh_specs(quick: bool, data_dir: Path) -> tuple[list[tuple[str, int, Calla
     specs: list[tuple[str, int, Callable[[], TetMesh]]] = []
     notes: list[str] = []
     for n in CUBE_NS:
-        specs.append((f"cube({n})", 6 * n**3, lambda n=n: synthetic.cube(n)))
+        specs.append((f"cube({n})", 6 * n**3, functools.partial(synthetic.cube, n)))
     if data_dir.is_dir():
         for fname, field in REAL_MESHES:
             path = data_dir / fname

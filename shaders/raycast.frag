@@ -108,7 +108,7 @@ void main() {
     vec3 p0_idx = o_idx + range.x * d_idx;
     float first = u_jitter == 1 ? jitter01() * dt : dt;
 
-    float u_prev = 0.0;
+    float off_prev = 0.0;
     float s_prev = scalar_at(p0_idx);
 #if RAYCAST_MODE == 0
     vec4 acc = vec4(0.0);
@@ -118,28 +118,28 @@ void main() {
     float s_sum = 0.0;
 #elif RAYCAST_MODE == 3
     bool hit = false;
-    float u_a = 0.0, u_b = 0.0, s_a = 0.0, s_b = 0.0;
+    float off_a = 0.0, off_b = 0.0, s_a = 0.0, s_b = 0.0;
 #endif
     for (int i = 0; i < u_max_steps; ++i) {
-        float u_next = min(first + float(i) * dt, len);
-        float s_next = scalar_at(p0_idx + u_next * d_idx);
+        float off_next = min(first + float(i) * dt, len);
+        float s_next = scalar_at(p0_idx + off_next * d_idx);
 #if RAYCAST_MODE == 0
-        vec4 piece = lookup_segment(s_prev, s_next, (u_next - u_prev) * world_per_t);
+        vec4 piece = lookup_segment(s_prev, s_next, (off_next - off_prev) * world_per_t);
         acc += (1.0 - acc.a) * piece;
         if (acc.a >= u_termination) break;
 #elif RAYCAST_MODE == 1
         s_max = max(s_max, s_next);
 #elif RAYCAST_MODE == 2
-        s_sum += 0.5 * (s_prev + s_next) * (u_next - u_prev);
+        s_sum += 0.5 * (s_prev + s_next) * (off_next - off_prev);
 #elif RAYCAST_MODE == 3
         if ((s_prev < u_iso) != (s_next < u_iso)) {
             hit = true;
-            u_a = u_prev; s_a = s_prev; u_b = u_next; s_b = s_next;
+            off_a = off_prev; s_a = s_prev; off_b = off_next; s_b = s_next;
             break;
         }
 #endif
-        if (u_next >= len) break;
-        u_prev = u_next;
+        if (off_next >= len) break;
+        off_prev = off_next;
         s_prev = s_next;
     }
 
@@ -154,13 +154,13 @@ void main() {
     // Bisection on the trilinear field, then a linear interpolation (as the reference).
     bool below_a = s_a < u_iso;
     for (int k = 0; k < ISO_REFINE_STEPS; ++k) {
-        float u_m = 0.5 * (u_a + u_b);
-        float s_m = scalar_at(p0_idx + u_m * d_idx);
-        if ((s_m < u_iso) == below_a) { u_a = u_m; s_a = s_m; } else { u_b = u_m; s_b = s_m; }
+        float off_m = 0.5 * (off_a + off_b);
+        float s_m = scalar_at(p0_idx + off_m * d_idx);
+        if ((s_m < u_iso) == below_a) { off_a = off_m; s_a = s_m; } else { off_b = off_m; s_b = s_m; }
     }
     float ds = s_b - s_a;
     float f = ds != 0.0 ? clamp((u_iso - s_a) / ds, 0.0, 1.0) : 0.5;
-    vec3 p_idx = p0_idx + (u_a + f * (u_b - u_a)) * d_idx;
+    vec3 p_idx = p0_idx + (off_a + f * (off_b - off_a)) * d_idx;
     vec3 g_idx = 0.5 * vec3(scalar_at(p_idx + vec3(1, 0, 0)) - scalar_at(p_idx - vec3(1, 0, 0)),
                             scalar_at(p_idx + vec3(0, 1, 0)) - scalar_at(p_idx - vec3(0, 1, 0)),
                             scalar_at(p_idx + vec3(0, 0, 1)) - scalar_at(p_idx - vec3(0, 0, 1)));

@@ -55,10 +55,14 @@ void exact_segment(int tet) {
 }
 
 void main() {
+#if NEAR_CROSSING
+    // Compiled in only for views where some point lies before the near plane: the
+    // extra code halves the speed of llvmpipe's fragment stage even when not taken.
     if (v_exact_tet >= 0) {
         exact_segment(v_exact_tet);
         return;
     }
+#endif
     vec3 pf = v_front.xyz / v_front.w;
     vec3 pb = v_back.xyz / v_back.w;
     float sf = v_scalar.x / v_front.w;

@@ -18,8 +18,10 @@ def test_every_shader_variant_compiles():
     with Renderer() as r:
         assert r.ctx.error == "GL_NO_ERROR"
         r._program("classify")
-        for kind, pc, norm in itertools.product(("tet", "floor"), (0, 1), (0, 1)):
-            r._program(kind, PERSPECTIVE_CORRECT=pc, TABLE_NORMALIZED=norm)
+        for pc, norm, near in itertools.product((0, 1), (0, 1), (0, 1)):
+            r._program("tet", PERSPECTIVE_CORRECT=pc, TABLE_NORMALIZED=norm, NEAR_CROSSING=near)
+        for kind in ("floor", "depth"):
+            r._program(kind, PERSPECTIVE_CORRECT=1)
         assert r.ctx.error == "GL_NO_ERROR"
 
 

@@ -267,7 +267,7 @@ def test_camera_inside_the_volume(raycaster):
     vol = sphere()
     c = vol.center
     cam = Camera(position=tuple(c + [0.3, 0.2, -0.1]), focal_point=tuple(c + [-1, 0.4, 0.3]), view_up=(0, 0, 1),
-                 view_angle=60.0, clipping_range=(0.05, 20.0))
+                 view_angle=90.0, clipping_range=(0.05, 20.0))
     assert np.all(np.abs(vol.world_to_index @ np.r_[cam.position, 1])[:3] < 23)
     _compare(raycaster, "inside", vol, cam, _shell_tf(vol))
 

@@ -154,6 +154,18 @@ def test_adjacency_matches_brute_force():
     assert adj.n_nonmanifold_faces == 0
 
 
+def test_nonmanifold_face_is_left_unpaired():
+    # Three tets on one face (two of them overlap): no neighbour is guessed.
+    pts = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, 0.5], [0.2, 0.2, -0.5], [0.3, 0.3, 0.9]]
+    mesh = TetMesh.from_arrays(pts, [[0, 1, 2, 3], [0, 1, 2, 4], [0, 1, 2, 5]], np.zeros(6))
+    adj = adjacency_mod.face_adjacency(mesh)
+    assert adj.n_nonmanifold_faces == 1 and adj.n_interior_faces == 0
+    assert np.all(adj.neighbors == -1) and np.all(adj.mates == -1)
+    order, stats = mpvonc_order(mesh, Camera.fit(mesh))
+    assert_permutation(order, 3)
+    assert stats.n_constraints == 0
+
+
 # ---------------------------------------------------------------- (2) where centroid fails
 
 

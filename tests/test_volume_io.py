@@ -221,7 +221,7 @@ def test_metaimage_with_direction_matrix(tmp_path, local, compressed):
     assert vol.space == "LPS"
 
 
-def _vti(array_xml: str, appended: bytes | None = None, *, header_type="UInt32", compressor="",
+def _vti(array_xml: str, appended: bytes | None = None, *, header_type="UInt32", compressor="", encoding="raw",
          extent=(0, 4, 0, 3, 0, 2), direction="1 0 0 0 1 0 0 0 1") -> bytes:
     ext = " ".join(str(v) for v in extent)
     comp = f' compressor="{compressor}"' if compressor else ""
@@ -232,7 +232,7 @@ def _vti(array_xml: str, appended: bytes | None = None, *, header_type="UInt32",
             f'  </Piece>\n  </ImageData>\n')
     out = text.encode()
     if appended is not None:
-        out += b'  <AppendedData encoding="raw">\n   _' + appended + b"\n  </AppendedData>\n"
+        out += f'  <AppendedData encoding="{encoding}">\n   _'.encode() + appended + b"\n  </AppendedData>\n"
     return out + b"</VTKFile>\n"
 
 
@@ -256,8 +256,13 @@ def test_vti_ascii_binary_compressed_and_appended(tmp_path):
     appended = junk + struct.pack("<Q", len(raw)) + raw
     app_xml = (f'      <DataArray type="UInt8" Name="junk" format="appended" offset="0"/>\n'
                f'      <DataArray type="Float32" Name="density" format="appended" offset="{len(junk)}"/>')
+    # Appended base64: each array is its own base64 stream; offsets count characters.
+    enc = [base64.b64encode(struct.pack("<I", 4) + b"\x00\x01\x02\x03"), base64.b64encode(struct.pack("<I", len(raw)) + raw)]
+    app64_xml = (f'      <DataArray type="UInt8" Name="junk" format="appended" offset="0"/>\n'
+                 f'      <DataArray type="Float32" Name="density" format="appended" offset="{len(enc[0])}"/>')
     files = {
         "ascii.vti": _vti(ascii_xml),
+        "appended64.vti": _vti(app64_xml, enc[0] + enc[1], encoding="base64"),
         "binary.vti": _vti(binary_xml),
         "zlib.vti": _vti(zxml, compressor="vtkZLibDataCompressor"),
         "appended.vti": _vti(app_xml, appended, header_type="UInt64"),

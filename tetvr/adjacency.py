@@ -63,8 +63,10 @@ class FaceAdjacency:
     --------
     >>> from tetvr import synthetic
     >>> adj = face_adjacency(synthetic.two_tets())
-    >>> adj.neighbors[:, 3].tolist(), adj.mates[:, 3].tolist(), adj.n_interior_faces
-    ([1, 0], [7, 3], 1)
+    >>> adj.neighbors.tolist()
+    [[-1, -1, -1, 1], [-1, -1, 0, -1]]
+    >>> int(adj.mates[0, 3]), adj.n_interior_faces, adj.n_boundary_faces
+    (6, 1, 6)
     """
 
     neighbors: NDArray[np.int32]
@@ -79,21 +81,37 @@ class FaceAdjacency:
     cell_size: float
 
 
-_CACHE: "weakref.WeakKeyDictionary[TetMesh, FaceAdjacency]" = weakref.WeakKeyDictionary()
+# Keyed on the identity of the (points, tets) arrays rather than on the mesh, so that
+# meshes that share geometry (``TetMesh.with_scalars``) share one adjacency. An entry is
+# dropped when either array is freed, before its id can be reused.
+_CACHE: dict[tuple[int, int], FaceAdjacency] = {}
 _LOCK = threading.Lock()
 
 
 def face_adjacency(mesh: TetMesh) -> FaceAdjacency:
-    """The face adjacency of ``mesh``, built on first use and cached for the mesh's life.
+    """The face adjacency of ``mesh``, built on first use and cached while it lives.
 
-    The cache is keyed on the mesh object (TetMesh is immutable and compared by identity)
-    and holds it weakly, so it does not keep meshes alive.
+    The cache follows the mesh's ``points`` and ``tets`` arrays (immutable in a
+    :class:`~tetvr.mesh.TetMesh`), so a mesh with only new scalars reuses it, and it
+    does not keep the arrays alive.
+
+    Examples
+    --------
+    >>> from tetvr import synthetic
+    >>> mesh = synthetic.cube(2)
+    >>> face_adjacency(mesh) is face_adjacency(mesh.with_scalars(mesh.scalars * 2))
+    True
     """
-    adj = _CACHE.get(mesh)
+    key = (id(mesh.points), id(mesh.tets))
+    adj = _CACHE.get(key)
     if adj is None:
         built = _build(mesh)
         with _LOCK:
-            adj = _CACHE.setdefault(mesh, built)
+            adj = _CACHE.get(key)
+            if adj is None:
+                adj = _CACHE[key] = built
+                for arr in (mesh.points, mesh.tets):
+                    weakref.finalize(arr, _CACHE.pop, key, None)
     return adj
 
 

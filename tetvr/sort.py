@@ -12,12 +12,12 @@ Williams, "Visibility-ordering meshed polyhedra", ACM TOG 11(2), 1992). Two tets
 share a face are ordered by that face's plane: the one on the eye's side of it is in
 front, so it is drawn later. Every interior face thus becomes an edge "draw A before B"
 of a directed graph over the cells, and any topological order of that graph is a
-visibility order when the mesh is convex and the graph acyclic (it always is for a
-Delaunay mesh). The face test is made against the *eye point*, ``n . eye - d``, not the
-view direction, so the order is right in perspective, including for cells beside or
-around the eye; VTK's and HAPT's sorters order for a single view direction, which is
-exact only for a parallel projection. With ``parallel_projection`` the view direction is
-used, as it should be. A face seen exactly edge-on (the eye in its plane, within
+visibility order when the mesh is convex and the graph acyclic (it is acyclic from every
+viewpoint for a Delaunay mesh, Edelsbrunner 1990). The face test is made against the *eye
+point*, ``n . eye - d``, not the view direction, so the order is right in perspective,
+including for cells beside or around the eye; the sorters of VTK and HAPT order for a
+single view direction, which is exact only for a parallel projection. With
+``parallel_projection`` the view direction is used, as it should be. A face seen exactly edge-on (the eye in its plane, within
 rounding) gives no edge: the two cells cannot overlap on screen then, and leaving the
 edge out cannot create a cycle.
 
@@ -29,11 +29,11 @@ the mesh's diameter in cells, O(m^(1/3)), so a million tets take a few hundred s
 ``mpvo`` emits each whole level, ordered inside by decreasing centroid distance: exact
 for convex meshes. On a mesh with cavities or several components, cells with no face path
 between them are not ordered at all, so a cell far behind can be drawn after a near one.
-``mpvonc`` is the non-convex variant. Williams' MPVONC takes the cells that start the
-sort (those whose back faces are all on the boundary) in order of distance from the
-viewpoint instead of all at once; here that is generalised to every ready cell: a step
-emits only the ready cells within ``depth_window`` (default: two typical cell sizes) of
-the farthest ready one. Every face constraint still holds (a ready cell is never
+``mpvonc`` is the non-convex variant. Williams' MPVONC heuristic takes the cells that
+start the sort (boundary cells with nothing behind them) in order of their distance from
+the viewpoint instead of all at once. Here that is applied to every ready cell, so that
+it also orders cells reached later: a step emits only the ready cells within
+``depth_window`` (default: two typical cell sizes) of the farthest ready one. Every face constraint still holds (a ready cell is never
 blocked), and cells that the graph does not relate come out back to front, as in the
 centroid sort. Like Williams' heuristic this is not exact for every non-convex mesh.
 
@@ -41,7 +41,8 @@ A cycle (possible in non-Delaunay meshes and in degenerate views) leaves cells t
 never become ready. It is broken by drawing one cell of the cycle regardless: the one with
 the fewest undrawn cells behind it, then the farthest, then the lowest id (see
 :func:`_break_cycle`). The number of breaks is reported in :class:`SortStats`
-(:func:`sort_with_stats`); it is zero whenever the order satisfies every face constraint.
+(:func:`sort_with_stats`); it is zero exactly when the order satisfies every face
+constraint.
 
 Ties are broken by the cell's position in the mesh, which is canonical (see
 :class:`~tetvr.mesh.TetMesh`), so the order does not depend on how the input was listed.

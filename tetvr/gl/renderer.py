@@ -295,8 +295,11 @@ class Renderer:
         self._order.write(np.ascontiguousarray(order_ids, dtype=np.uint32).tobytes())
         self._clock.lap("order_upload")
 
-        prog = self._program(shader, PERSPECTIVE_CORRECT=int(self.settings.perspective_correct),
-                             TABLE_NORMALIZED=int(table.encoding == "normalized"))
+        defines = dict(PERSPECTIVE_CORRECT=int(self.settings.perspective_correct),
+                       TABLE_NORMALIZED=int(table.encoding == "normalized"))
+        if shader == "tet":
+            defines["NEAR_CROSSING"] = int(_crosses_near_plane(mesh, camera))
+        prog = self._program(shader, **defines)
         _set(prog, u_scalar_range=table.scalar_range, u_d_min=table.d_min,
              u_inv_log_base=1.0 / np.log(table.log_base), u_alpha_scale=table.alpha_scale,
              u_table_size=(table.n_bins, table.n_bins, table.n_slices + 1), u_table=0, **uniforms)
@@ -334,6 +337,12 @@ class Renderer:
         front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)
         back = np.where(ext[..., 1] >= 3e38, -np.inf, -ext[..., 1]).astype(np.float32)
         return front, back
+
+
+def _crosses_near_plane(mesh: TetMesh, camera: Camera) -> bool:
+    """Whether any point lies nearer than the near plane (then some tet may cross it)."""
+    depth = (mesh.points - np.asarray(camera.position)) @ np.asarray(camera.direction)
+    return bool(depth.min() < camera.clipping_range[0])
 
 
 def _check_size(size: tuple[int, int], ctx: Any) -> tuple[int, int]:
