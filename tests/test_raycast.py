@@ -24,6 +24,7 @@ from tetvr.gl.raycaster import MODES, Raycaster
 from tetvr.image import psnr
 from tetvr.optics import mean_neg_log
 from tetvr.raycast_reference import (
+    INTERPOLATIONS,
     RAYCAST_MODES,
     RaycastSettings,
     normalize_ray_limits,
@@ -136,7 +137,8 @@ def test_modes_table_matches_settings_and_every_variant_compiles():
     with Raycaster() as rc:
         assert rc.ctx.error == "GL_NO_ERROR"
         for mode in MODES:
-            rc._program(mode)
+            for interpolation in INTERPOLATIONS:
+                rc._program(mode, interpolation)
         assert rc.ctx.error == "GL_NO_ERROR"
 
 
@@ -249,6 +251,17 @@ def test_other_modes(raycaster, mode):
           "xray": TransferFunction.preset("hot", (0.0, 0.3), opacity=[(0, 0), (1, 0.9)])}[mode]
     settings = RaycastSettings(mode=mode, iso_value=0.8 * vol.scalar_range[1] if mode == "isosurface" else None)
     _compare(raycaster, f"{mode}", vol, _camera(vol, (-0.7, 0.9, -0.5)), tf, settings=settings)
+
+
+@pytest.mark.parametrize("mode", ["emission_absorption", "isosurface"])
+def test_cubic_bspline_reconstruction(raycaster, mode):
+    vol = blobs(16)
+    settings = RaycastSettings(mode=mode, interpolation="cubic", termination=1.0, iso_value=0.5)
+    cam, tf = _camera(vol, (0.6, -0.8, 0.4)), _blob_tf(vol)
+    _compare(raycaster, f"cubic_{mode}", vol, cam, tf, settings=settings, size=(48, 48))
+    linear = raycaster.render(vol, cam, tf, size=(48, 48), settings=dataclasses.replace(settings, interpolation="linear"))
+    cubic = raycaster.render(vol, cam, tf, size=(48, 48), settings=settings)
+    assert psnr(linear, cubic) < 45  # the reconstruction really changed
 
 
 def test_isosurface_is_lit_by_the_headlight(raycaster):

@@ -419,6 +419,15 @@ def test_sampling_is_exact_at_voxels_and_trilinear_between():
     world = ijk @ vol.index_to_world[:3, :3].T + vol.index_to_world[:3, 3]
     np.testing.assert_allclose(vol.sample(world), ijk[:, 0] + 10 * ijk[:, 1] + 100 * ijk[:, 2] - 7, atol=1e-9)
     assert np.isnan(vol.sample(vol.index_to_world[:3, 3] - 5 * vol.direction[:, 0])).all()
+    # The cubic B-spline reproduces linear functions too, away from the clamped edges;
+    # it smooths a spike to 8/27 of its height at the voxel (weights 1/6, 4/6, 1/6).
+    inner = rng.uniform([1, 1, 1], [3, 2, 1], size=(50, 3))
+    np.testing.assert_allclose(vol.sample_index(inner, interpolation="cubic"),
+                               inner[:, 0] + 10 * inner[:, 1] + 100 * inner[:, 2] - 7, atol=1e-9)
+    spike = Volume.from_array(np.pad(np.ones((1, 1, 1)), 2))
+    assert spike.sample_index([2.0, 2.0, 2.0], interpolation="cubic") == pytest.approx((4 / 6) ** 3)
+    with pytest.raises(ValueError, match="interpolation"):
+        vol.sample_index(inner, interpolation="nearest")
 
 
 def test_downsampling_keeps_the_box_and_warns():

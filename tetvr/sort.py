@@ -108,7 +108,8 @@ class SortStats:
     ----------
     method : the sort method.
     n_cells : cells ordered.
-    n_steps : vectorised steps taken (graph levels for ``mpvo``; 1 for the others).
+    n_steps : vectorised steps taken: graph levels for ``mpvo``, depth-window batches
+        for ``mpvonc``, plus one per cycle break; 1 for the non-graph methods.
     n_sources : cells with no cell behind them across a face (0 for non-graph methods).
     n_constraints : interior faces that gave an ordering edge.
     n_edge_on : interior faces seen edge-on (no edge needed).
@@ -142,7 +143,8 @@ def _face_graph(adj: FaceAdjacency, camera: Camera) -> tuple[NDArray[np.int32], 
     side of the face), else -1. ``clear[t, k]`` is False while a cell behind t across
     face k, which must be drawn first, is not drawn yet: True at the start for boundary
     faces, faces toward the eye, and faces within rounding of the eye's plane (seen
-    edge-on, the two cells cannot overlap on screen, and no edge can make no cycle).
+    edge-on, the two cells cannot overlap on screen, and a missing edge cannot close a
+    cycle).
     """
     flat_n = adj.normals.reshape(-1, 3)
     if camera.parallel_projection:

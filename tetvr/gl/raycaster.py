@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..camera import Camera
 from ..preintegrate import PreintegrationTable, table_for
-from ..raycast_reference import RAYCAST_MODES, RaycastSettings, normalize_ray_limits
+from ..raycast_reference import INTERPOLATIONS, RAYCAST_MODES, RaycastSettings, normalize_ray_limits
 from ..transfer import TransferFunction
 from ..volume import Volume
 from .context import create_context, describe
@@ -51,6 +51,10 @@ MODES: dict[str, _Mode] = {
     "isosurface": _Mode(defines=(("RAYCAST_MODE", 3),), uses_table=False),
 }
 assert tuple(MODES) == RAYCAST_MODES
+
+#: Reconstruction -> INTERPOLATION_CUBIC define.
+_INTERPOLATIONS = {"linear": 0, "cubic": 1}
+assert tuple(_INTERPOLATIONS) == INTERPOLATIONS
 
 # Volume dtype -> (moderngl texture dtype, factor that turns the texel back into the value).
 # Normalized formats keep 8/16-bit data exact at a quarter/half the memory of float32.
@@ -163,10 +167,11 @@ class Raycaster:
         return objs
 
     # ---- programs ----
-    def _program(self, mode: str) -> Any:
+    def _program(self, mode: str, interpolation: str = "linear") -> Any:
         spec = MODES[mode]
         defines = dict(spec.defines)
         defines["TABLE_NORMALIZED"] = 1
+        defines["INTERPOLATION_CUBIC"] = _INTERPOLATIONS[interpolation]
         key = tuple(f"{k}={v}" for k, v in sorted(defines.items()))
         prog = self._programs.get(key)
         if prog is not None:
@@ -179,7 +184,7 @@ class Raycaster:
         except ShaderCompileError:
             raise
         except Exception as exc:
-            raise ShaderCompileError(f"raycast ({mode}): {explain(exc, files)}") from exc
+            raise ShaderCompileError(f"raycast ({mode}, {interpolation}): {explain(exc, files)}") from exc
         self._programs[key] = prog
         return prog
 
@@ -362,7 +367,7 @@ class Raycaster:
         clip_lo, clip_hi = (np.asarray(s.clip_box[0]) - centre, np.asarray(s.clip_box[1]) - centre) \
             if s.clip_box is not None else (np.zeros(3), np.zeros(3))
         lo, hi = table.scalar_range
-        prog = self._program(s.mode)
+        prog = self._program(s.mode, s.interpolation)
         _set(prog,
              u_inv_viewport=(1.0 / width, 1.0 / height), u_perspective=0 if camera.parallel_projection else 1,
              u_k=(k * aspect, k), u_eye_to_index=eye_to_index, u_eye_to_local=eye_to_local,

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,6 +30,7 @@ __all__ = ["Renderer", "FrameStats"]
 _FAN_BYTES = 48  # sizeof(TetFan) in std430
 _GROUP = 64  # classify.comp local size
 _MAX_GROUPS = 65535
+_DEFAULT_CHUNK = 2_000_000  # tets per draw: 96 MB of fans, under llvmpipe's 128 MB SSBO limit
 
 
 @dataclasses.dataclass(frozen=True)
@@ -58,6 +59,8 @@ class Renderer:
     ----------
     settings : method settings (table size, sort, interpolation).
     profile : wait for the GPU after each stage so :attr:`last_stats` holds stage times.
+    chunk_tets : the most tets drawn at once (default 2M, capped by the GL's storage
+        buffer size); larger meshes are classified and drawn in sorted chunks.
 
     Examples
     --------
@@ -65,10 +68,19 @@ class Renderer:
     ...     image = r.render(mesh, camera, tf, size=(256, 256))
     """
 
-    def __init__(self, settings: RenderSettings | None = None, *, profile: bool = False) -> None:
+    def __init__(self, settings: RenderSettings | None = None, *, profile: bool = False,
+                 chunk_tets: int | None = None) -> None:
         self.settings = settings or RenderSettings()
         self.profile = profile
         self.ctx: Any = create_context()
+        # One storage buffer must hold a chunk's fans (48 B/tet); meshes beyond it are drawn
+        # in sorted chunks, each classified and drawn in turn.
+        self._max_ssbo = int(self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE", 1 << 27))
+        limit = self._max_ssbo // _FAN_BYTES
+        if chunk_tets is not None and not (isinstance(chunk_tets, int) and 1 <= chunk_tets):
+            raise ValueError(f"chunk_tets must be a positive integer, got {chunk_tets!r}")
+        self.chunk_tets = min(chunk_tets or _DEFAULT_CHUNK, limit)
+        self._chunked = False
         self.gl_info = describe(self.ctx)
         self._programs: dict[tuple[str, ...], Any] = {}
         self._mesh: TetMesh | None = None
@@ -144,11 +156,11 @@ class Renderer:
 
     # ---- per-mesh, per-table, per-size state ----
     def _use_mesh(self, mesh: TetMesh) -> None:
+        """Upload the mesh once. Meshes larger than one draw allows keep only their points
+        on the GPU; their cells then travel per frame in sorted chunks (:meth:`_chunks`)."""
         if mesh is self._mesh:
             return
-        for b in self._mesh_buffers:
-            b.release()
-        for b in (self._fans, self._order):
+        for b in [*self._mesh_buffers, self._fans, self._order]:
             if b is not None:
                 b.release()
         # Coordinates relative to the mesh centre keep float32 precise far from the origin.
@@ -156,12 +168,39 @@ class Renderer:
         pts = np.empty((mesh.n_points, 4), dtype=np.float32)
         pts[:, :3] = mesh.points - self._centre
         pts[:, 3] = mesh.scalars
+        if pts.nbytes > self._max_ssbo:
+            raise MemoryError(f"the mesh has {mesh.n_points} points ({pts.nbytes >> 20} MiB); this GL allows "
+                              f"{self._max_ssbo >> 20} MiB in one storage buffer")
+        chunk = min(mesh.n_tets, self.chunk_tets)
+        self._chunked = chunk < mesh.n_tets
         points = self.ctx.buffer(pts.tobytes())
-        tets = self.ctx.buffer(np.ascontiguousarray(mesh.tets, dtype=np.int32).tobytes())
+        if self._chunked:
+            tets = self.ctx.buffer(reserve=chunk * 16)
+        else:
+            tets = self.ctx.buffer(np.ascontiguousarray(mesh.tets, dtype=np.int32).tobytes())
         self._mesh_buffers = [points, tets]
-        self._fans = self.ctx.buffer(reserve=max(mesh.n_tets, 1) * _FAN_BYTES)
-        self._order = self.ctx.buffer(reserve=max(mesh.n_tets, 1) * 4)
+        self._fans = self.ctx.buffer(reserve=max(chunk, 1) * _FAN_BYTES)
+        self._order = self.ctx.buffer(reserve=max(chunk, 1) * 4)
+        if self._chunked:
+            self._order.write(np.arange(chunk, dtype=np.uint32).tobytes())
         self._mesh = mesh
+
+    def _chunks(self, mesh: TetMesh, order: NDArray[np.uint32]) -> Iterator[int]:
+        """Make each chunk of the drawing order current in turn; yields its cell count.
+
+        Unchunked meshes are one chunk: the order buffer holds the order. Chunked meshes
+        get the cells of each chunk uploaded in drawing order, with an identity order.
+        """
+        if not self._chunked:
+            self._order.write(np.ascontiguousarray(order, dtype=np.uint32).tobytes())
+            self._clock.lap("order_upload")
+            yield mesh.n_tets
+            return
+        for first in range(0, mesh.n_tets, self.chunk_tets):
+            ids = order[first:first + self.chunk_tets]
+            self._mesh_buffers[1].write(np.ascontiguousarray(mesh.tets[ids], dtype=np.int32).tobytes())
+            self._clock.lap("order_upload")
+            yield int(ids.shape[0])
 
     def _use_table(self, table: PreintegrationTable) -> None:
         if table is self._table:
@@ -205,32 +244,36 @@ class Renderer:
                          n_slices=s.table_thickness_slices, log_base=s.table_log_base,
                          encoding=s.table_encoding, dtype=s.table_dtype)
 
-    def _classify(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> dict[str, Any]:
-        """Upload the mesh if new and run the classification; returns the view uniforms."""
+    def _view_uniforms(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> dict[str, Any]:
+        """Upload the mesh if new; the uniforms of this view."""
         self._use_mesh(mesh)
         self._clock.lap("upload")
         view = camera.view_matrix()
         view[:3, 3] += view[:3, :3] @ self._centre  # the buffers hold points minus the centre
         near, far = camera.clipping_range
-        uniforms = dict(u_view=view, u_proj=camera.projection_matrix(size[0] / size[1]),
-                        u_perspective=0 if camera.parallel_projection else 1, u_near=near, u_far=far,
-                        u_viewport=(float(size[0]), float(size[1])))
+        return dict(u_view=view, u_proj=camera.projection_matrix(size[0] / size[1]),
+                    u_perspective=0 if camera.parallel_projection else 1, u_near=near, u_far=far,
+                    u_viewport=(float(size[0]), float(size[1])))
+
+    def _classify(self, n_tets: int, uniforms: dict[str, Any]) -> None:
+        """Run classify.comp over the tets in the tets buffer."""
         classify = self._program("classify")
-        _set(classify, u_count=mesh.n_tets, **uniforms)
+        _set(classify, u_count=n_tets, **uniforms)
         self._mesh_buffers[0].bind_to_storage_buffer(0)
         self._mesh_buffers[1].bind_to_storage_buffer(1)
         self._fans.bind_to_storage_buffer(2)
-        groups = (mesh.n_tets + _GROUP - 1) // _GROUP
+        groups = (n_tets + _GROUP - 1) // _GROUP
         for first in range(0, groups, _MAX_GROUPS):
             _set(classify, u_offset=first * _GROUP)
             classify.run(min(_MAX_GROUPS, groups - first))
         self._clock.lap("classify")
-        return uniforms
 
     def _draw(self, prog: Any, fbo: Any, n_tets: int, blend: tuple[Any, ...]) -> None:
         import moderngl
 
         fbo.use()
+        self._mesh_buffers[0].bind_to_storage_buffer(0)
+        self._mesh_buffers[1].bind_to_storage_buffer(1)
         self.ctx.memory_barrier()
         self._fans.bind_to_storage_buffer(2)
         self._order.bind_to_storage_buffer(3)
@@ -284,16 +327,14 @@ class Renderer:
         table = self.table(mesh, tf)
         self._use_table(table)
         self._clock.lap("table")
-        uniforms = self._classify(mesh, camera, size)
+        uniforms = self._view_uniforms(mesh, camera, size)
         if order is None:
             order_ids = visibility_order(mesh, camera, self.settings.sort)
         else:
             order_ids = np.asarray(order)
-            if order_ids.shape != (mesh.n_tets,):
+            if order_ids.shape != (mesh.n_tets,) or order_ids.dtype.kind not in "iu":
                 raise ValueError(f"order must list all {mesh.n_tets} cells once, got shape {order_ids.shape}")
         self._clock.lap("sort")
-        self._order.write(np.ascontiguousarray(order_ids, dtype=np.uint32).tobytes())
-        self._clock.lap("order_upload")
 
         defines = dict(PERSPECTIVE_CORRECT=int(self.settings.perspective_correct),
                        TABLE_NORMALIZED=int(table.encoding == "normalized"))
@@ -303,12 +344,14 @@ class Renderer:
         _set(prog, u_scalar_range=table.scalar_range, u_d_min=table.d_min,
              u_inv_log_base=1.0 / np.log(table.log_base), u_alpha_scale=table.alpha_scale,
              u_table_size=(table.n_bins, table.n_bins, table.n_slices + 1), u_table=0, **uniforms)
-        self._table_tex.use(0)
         fb_dtype = "f4" if self.settings.framebuffer == "float32" else "f1"
         fbo = self._use_target(size, 4, fb_dtype)
         fbo.use()
         fbo.clear(0.0, 0.0, 0.0, 0.0)
-        self._draw(prog, fbo, mesh.n_tets, ((moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA), moderngl.FUNC_ADD))
+        for n in self._chunks(mesh, order_ids):
+            self._classify(n, uniforms)
+            self._table_tex.use(0)
+            self._draw(prog, fbo, n, ((moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA), moderngl.FUNC_ADD))
         image = self._read(fbo, size, 4, fb_dtype)
         self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, **self._clock.laps)
         return image
@@ -324,15 +367,16 @@ class Renderer:
         import moderngl
 
         size = self._check(size)
-        uniforms = self._classify(mesh, camera, size)
-        # Any order will do: MIN blending is commutative.
-        self._order.write(np.arange(mesh.n_tets, dtype=np.uint32).tobytes())
+        uniforms = self._view_uniforms(mesh, camera, size)
         prog = self._program("depth", PERSPECTIVE_CORRECT=int(self.settings.perspective_correct))
         _set(prog, **uniforms)
         fbo = self._use_target(size, 2)
         fbo.use()
         fbo.clear(3e38, 3e38, 0.0, 0.0)
-        self._draw(prog, fbo, mesh.n_tets, ((moderngl.ONE, moderngl.ONE), moderngl.MIN))
+        # Any order will do: MIN blending is commutative.
+        for n in self._chunks(mesh, np.arange(mesh.n_tets, dtype=np.uint32)):
+            self._classify(n, uniforms)
+            self._draw(prog, fbo, n, ((moderngl.ONE, moderngl.ONE), moderngl.MIN))
         ext = self._read(fbo, size, 2)
         front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)
         back = np.where(ext[..., 1] >= 3e38, -np.inf, -ext[..., 1]).astype(np.float32)
