@@ -386,6 +386,16 @@ def test_dicom_series_sorted_by_position_with_rescale(tmp_path):
     np.testing.assert_allclose(vol.origin, [5.0, -3.0, 40.0])
 
 
+def test_dicom_duplicate_slice_positions_are_rejected(tmp_path):
+    raw = (_ramp((4, 3, 5), dtype=np.int32) + 1000).astype(np.uint16)
+    _write_dicom_series(tmp_path / "s", raw)
+    _write_dicom_series(tmp_path / "t", raw[:1])  # same series UID, same position as slice 0
+    for f in (tmp_path / "t").glob("*.dcm"):
+        f.rename(tmp_path / "s" / ("dup" + f.name))
+    with pytest.raises(ValueError, match="1 slice.*position of another"):
+        read_dicom(tmp_path / "s")
+
+
 def test_dicom_picks_largest_series_and_warns(tmp_path):
     raw = (_ramp((4, 3, 5), dtype=np.int32) + 1000).astype(np.uint16)
     _write_dicom_series(tmp_path / "s", raw)

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Literal
+from typing import Any, Callable, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -367,9 +367,21 @@ def render_volume_reference(
     return out.reshape(height, width, 4).astype(np.float32)
 
 
+class _Samples(NamedTuple):
+    """The fine samples of a batch of rays, and the pieces between them (in ray order)."""
+
+    rows: NDArray[np.int64]  # pixel of each ray of the batch
+    t: Float  # sample positions (eye depth), ray after ray
+    scalar: Float  # the field there
+    first: NDArray[np.int64]  # index of each ray's first sample
+    piece: NDArray[np.int64]  # index of the sample at the front of each piece
+    piece_ray: NDArray[np.int64]  # ray (in the batch) of each piece
+    length: Float  # world length of each piece
+
+
 def _march(volume: Volume, tf: TransferFunction, s: RaycastSettings, rays: RayIntervals, rows: NDArray[np.int64],
            n_piece: NDArray[np.int64], wpt: Float) -> Float:
-    """The pixels ``rows``: sample, then integrate / reduce according to the mode."""
+    """The pixels ``rows``: sample finely, then integrate or reduce as the mode says."""
     n_rays = rows.shape[0]
     n_samp = n_piece + 1
     ray = np.repeat(np.arange(n_rays), n_samp)
@@ -380,58 +392,72 @@ def _march(volume: Volume, tf: TransferFunction, s: RaycastSettings, rays: RayIn
     t[first + n_piece] = t1  # the exact exit
     o_idx, d_idx = rays.origins_index[rows], rays.directions_index[rows]
     scal = volume.sample_index(o_idx[ray] + t[:, None] * d_idx[ray], interpolation=s.interpolation)
-    out = np.zeros((n_rays, 4))
-    seg = np.ones(ray.shape[0], dtype=bool)
-    seg[first + n_piece] = False  # a sample that is the last of its ray starts no piece
-    seg_i = np.nonzero(seg)[0]
-    seg_ray = ray[seg_i]
-    length = (t[seg_i + 1] - t[seg_i]) * wpt[rows][seg_ray]
-
-    if s.mode == "emission_absorption":
-        rgb, theta = integrate_segments(scal[seg_i], scal[seg_i + 1], length, tf)
-        out = composite(seg_ray, t[seg_i], rgb, theta, n_rays)
-    elif s.mode in ("mip", "xray"):
-        if s.mode == "mip":
-            value = np.maximum.reduceat(scal, first)
-        else:
-            mean_s = 0.5 * (scal[seg_i] + scal[seg_i + 1])
-            total = np.bincount(seg_ray, weights=length, minlength=n_rays)
-            acc = np.bincount(seg_ray, weights=mean_s * length, minlength=n_rays)
-            value = np.where(total > 0, acc / np.where(total > 0, total, 1.0), scal[first])
-        c, a = tf.evaluate(value)
-        out[:, :3] = c * a[:, None]
-        out[:, 3] = a
-    else:
-        out = _isosurface(volume, tf, s, rays, rows, scal, t, seg_i, seg_ray, n_rays)
-    return out
+    starts_piece = np.ones(ray.shape[0], dtype=bool)
+    starts_piece[first + n_piece] = False  # the last sample of a ray starts no piece
+    piece = np.nonzero(starts_piece)[0]
+    length = (t[piece + 1] - t[piece]) * wpt[rows][ray[piece]]
+    samples = _Samples(rows, t, scal, first, piece, ray[piece], length)
+    return _MODES[s.mode](volume, tf, s, rays, samples)
 
 
-def _isosurface(volume: Volume, tf: TransferFunction, s: RaycastSettings, rays: RayIntervals, rows: NDArray[np.int64],
-                scal: Float, t: Float, seg_i: NDArray[np.int64], seg_ray: NDArray[np.int64], n_rays: int) -> Float:
+def _emission_absorption(volume: Volume, tf: TransferFunction, s: RaycastSettings, rays: RayIntervals,
+                         x: _Samples) -> Float:
+    rgb, theta = integrate_segments(x.scalar[x.piece], x.scalar[x.piece + 1], x.length, tf)
+    return composite(x.piece_ray, x.t[x.piece], rgb, theta, x.rows.shape[0])
+
+
+def _classified(tf: TransferFunction, value: Float) -> Float:
+    c, a = tf.evaluate(value)
+    return np.concatenate([c * a[:, None], a[:, None]], axis=1)
+
+
+def _mip(volume: Volume, tf: TransferFunction, s: RaycastSettings, rays: RayIntervals, x: _Samples) -> Float:
+    return _classified(tf, np.maximum.reduceat(x.scalar, x.first))
+
+
+def _xray(volume: Volume, tf: TransferFunction, s: RaycastSettings, rays: RayIntervals, x: _Samples) -> Float:
+    n = x.rows.shape[0]
+    mean_s = 0.5 * (x.scalar[x.piece] + x.scalar[x.piece + 1])
+    total = np.bincount(x.piece_ray, weights=x.length, minlength=n)
+    acc = np.bincount(x.piece_ray, weights=mean_s * x.length, minlength=n)
+    return _classified(tf, np.where(total > 0, acc / np.where(total > 0, total, 1.0), x.scalar[x.first]))
+
+
+def _isosurface(volume: Volume, tf: TransferFunction, s: RaycastSettings, rays: RayIntervals, x: _Samples) -> Float:
     iso = s.iso_for(volume)
-    out = np.zeros((n_rays, 4))
-    crosses = (scal[seg_i] < iso) != (scal[seg_i + 1] < iso)
-    cand = seg_i[crosses]
+    out = np.zeros((x.rows.shape[0], 4))
+    crosses = (x.scalar[x.piece] < iso) != (x.scalar[x.piece + 1] < iso)
+    cand = x.piece[crosses]
     if cand.size == 0:
         return out
-    cand_ray = seg_ray[crosses]
+    cand_ray = x.piece_ray[crosses]
     # The first crossing of each ray: candidates are in ray order.
     keep = np.r_[True, cand_ray[1:] != cand_ray[:-1]]
     cand, hit_ray = cand[keep], cand_ray[keep]
-    o_idx = rays.origins_index[rows][hit_ray]
-    d_idx = rays.directions_index[rows][hit_ray]
-    ta, tb = t[cand].copy(), t[cand + 1].copy()
-    sa, sb = scal[cand].copy(), scal[cand + 1].copy()
-    t_hit = _refine(volume, o_idx, d_idx, ta, tb, sa, sb, iso, s.interpolation)
+    o_idx = rays.origins_index[x.rows][hit_ray]
+    d_idx = rays.directions_index[x.rows][hit_ray]
+    t_hit = _refine(volume, o_idx, d_idx, x.t[cand], x.t[cand + 1], x.scalar[cand], x.scalar[cand + 1], iso,
+                    s.interpolation)
     p = o_idx + t_hit[:, None] * d_idx
     normal = _normals(volume, p, s.interpolation)
-    view = -rays.directions[rows][hit_ray]
+    view = -rays.directions[x.rows][hit_ray]
     view /= np.linalg.norm(view, axis=1)[:, None]
     color, _ = tf.evaluate(np.full(hit_ray.shape[0], iso))
     shaded = shade_blinn_phong(color, normal, view, s.shading)
     out[hit_ray, :3] = shaded * s.iso_opacity
     out[hit_ray, 3] = s.iso_opacity
     return out
+
+
+#: Mode -> what the reference does with a batch of fine samples (the GPU's table is
+#: :data:`tetvr.gl.raycaster.MODES`).
+_MODES: dict[str, Callable[[Volume, TransferFunction, RaycastSettings, RayIntervals, _Samples], Float]] = {
+    "emission_absorption": _emission_absorption,
+    "mip": _mip,
+    "xray": _xray,
+    "isosurface": _isosurface,
+}
+assert tuple(_MODES) == RAYCAST_MODES
 
 
 def _refine(volume: Volume, o_idx: Float, d_idx: Float, ta: Float, tb: Float, sa: Float, sb: Float, iso: float,

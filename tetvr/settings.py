@@ -23,7 +23,10 @@ class RenderSettings:
     Parameters
     ----------
     sort : visibility order of the cells: ``"centroid"`` (back to front by centroid
-        distance) or ``"none"`` (input order; only for measurements).
+        distance; fast, wrong where large cells overlap small ones), ``"mpvo"`` (Williams'
+        MPVO: exact for convex meshes), ``"mpvonc"`` (MPVO with Williams' non-convex
+        heuristic; cycles are broken and counted) or ``"none"`` (input order; only for
+        measurements).
     table_scalar_bins : N, samples of the scalar axis of the pre-integration table.
     table_thickness_slices : K, thickness slices on the logarithmic axis.
     table_log_base : ratio between consecutive thickness slices.

@@ -1335,12 +1335,17 @@ def read_dicom(path: str | os.PathLike[str], *, space: str = "LPS") -> Volume:
     if len(group) > 1:
         gaps = np.diff(ipp @ normal)
         dz = float(np.median(gaps))
-        if dz <= 0:
-            raise ValueError(f"DICOM series in {str(p)!r} has slices at the same position (spacing {dz})")
+        if gaps.min() <= 1e-6 * max(abs(dz), 1.0):
+            raise ValueError(f"DICOM series in {str(p)!r} has {int(np.sum(gaps <= 1e-6 * max(abs(dz), 1.0)))} "
+                             f"slice(s) at the position of another (duplicates or several acquisitions)")
         if np.max(np.abs(gaps - dz)) > 1e-3 * max(dz, 1.0) + 1e-4:
             warnings.warn(f"DICOM slice spacing is not uniform ({gaps.min():.4g} .. {gaps.max():.4g}); using {dz:.4g}",
                           stacklevel=2)
-        slice_dir = (ipp[-1] - ipp[0]) / np.linalg.norm(ipp[-1] - ipp[0])
+        # Along the line through the slice positions (not the normal): a tilted gantry
+        # gives a sheared grid, which the direction matrix represents as it is.
+        span = ipp[-1] - ipp[0]
+        slice_dir = span / np.linalg.norm(span)
+        dz = float(np.linalg.norm(span)) / (len(group) - 1)
     else:
         dz = float(group[0].get("SpacingBetweenSlices", group[0].get("SliceThickness", 1.0)) or 1.0)
         slice_dir = normal

@@ -39,8 +39,8 @@ class _Mode:
     """How a mode is drawn: its shader defines, what it reads, its blend state."""
 
     defines: tuple[tuple[str, int], ...]
-    uses_table: bool
-    blend: None = None  # the fragment composites the whole ray itself
+    uses_table: bool  # the pre-integration table (else only the 1D transfer function)
+    blend: bool = False  # no mode blends: each fragment composites its whole ray itself
 
 
 #: Rendering mode -> shader variant (see :class:`~tetvr.raycast_reference.RaycastSettings`).
@@ -57,7 +57,9 @@ _INTERPOLATIONS = {"linear": 0, "cubic": 1}
 assert tuple(_INTERPOLATIONS) == INTERPOLATIONS
 
 # Volume dtype -> (moderngl texture dtype, factor that turns the texel back into the value).
-# Normalized formats keep 8/16-bit data exact at a quarter/half the memory of float32.
+# Normalized formats keep 8/16-bit data exact at a quarter/half the memory of float32
+# (signed normalized maps the most negative value to -1 like the next one: -32768 reads
+# as -32767). Other dtypes go up as float32.
 _TEXTURE_FORMATS: dict[str, tuple[str, float]] = {
     "uint8": ("f1", 255.0),
     "int8": ("ni1", 127.0),
@@ -344,10 +346,18 @@ class Raycaster:
         use_limits = self._use_limits(t_start, t_end, (width, height))
         clock.lap("upload")
         mode = MODES[s.mode]
-        table = self.table(volume, tf, s)  # range from the original volume: downsampling only narrows it
+        # Ranges come from the original volume: downsampling only narrows them.
+        table_uniforms: dict[str, Any] = {}
         if mode.uses_table:
+            table = self.table(volume, tf, s)
             self._use_table(table)
-        self._use_tf(tf, table.scalar_range, s.tf_samples)
+            scalar_range = table.scalar_range
+            table_uniforms = dict(u_d_min=table.d_min, u_inv_log_base=1.0 / np.log(table.log_base),
+                                  u_alpha_scale=table.alpha_scale,
+                                  u_table_size=(table.n_bins, table.n_bins, table.n_slices + 1), u_table=0)
+        else:
+            scalar_range = _classification_range(volume, tf)
+        self._use_tf(tf, scalar_range, s.tf_samples)
         clock.lap("table")
 
         step = s.step_for(volume)
@@ -366,7 +376,6 @@ class Raycaster:
         a_inv = gpu.world_to_index[:3, :3]
         clip_lo, clip_hi = (np.asarray(s.clip_box[0]) - centre, np.asarray(s.clip_box[1]) - centre) \
             if s.clip_box is not None else (np.zeros(3), np.zeros(3))
-        lo, hi = table.scalar_range
         prog = self._program(s.mode, s.interpolation)
         _set(prog,
              u_inv_viewport=(1.0 / width, 1.0 / height), u_perspective=0 if camera.parallel_projection else 1,
@@ -378,16 +387,14 @@ class Raycaster:
              u_iso=s.iso_for(volume), u_iso_opacity=s.iso_opacity, u_shading=s.shading,
              u_gradient_to_local=a_inv.T,
              u_inv_dims=tuple(1.0 / n for n in gpu.dims), u_value_scale=self._value_scale, u_value_offset=0.0,
-             u_tf_size=float(s.tf_samples), u_scalar_range=(lo, hi), u_d_min=table.d_min,
-             u_inv_log_base=1.0 / np.log(table.log_base), u_alpha_scale=table.alpha_scale,
-             u_table_size=(table.n_bins, table.n_bins, table.n_slices + 1),
-             u_table=0, u_volume=1, u_tf=2, u_limits=3)
+             u_tf_size=float(s.tf_samples), u_scalar_range=scalar_range, u_volume=1, u_tf=2, u_limits=3,
+             **table_uniforms)
         self._use_target((width, height))
         self._fbo.use()
         self._fbo.clear(0.0, 0.0, 0.0, 0.0)
         import moderngl
 
-        if mode.uses_table and self._table_tex is not None:
+        if mode.uses_table:
             self._table_tex.use(0)
         self._volume_tex.use(1)
         self._tf_tex.use(2)
@@ -406,6 +413,16 @@ class Raycaster:
             raise RuntimeError(f"OpenGL error after ray casting: {err}")
         self.last_stats = RaycastStats(size=(width, height), volume_dims=gpu.dims, max_steps=max_steps, **clock.laps)
         return image
+
+
+def _classification_range(volume: Volume, tf: TransferFunction) -> tuple[float, float]:
+    """The scalar span of the transfer-function texture: data and TF domain (as table_for)."""
+    lo = min(volume.scalar_range[0], tf.domain[0])
+    hi = max(volume.scalar_range[1], tf.domain[1])
+    if hi <= lo:
+        pad = max(abs(lo) * 1e-6, 1e-12)
+        lo, hi = lo - pad, hi + pad
+    return lo, hi
 
 
 def _check_size(size: tuple[int, int], ctx: Any) -> tuple[int, int]:

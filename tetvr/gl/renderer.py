@@ -20,7 +20,7 @@ from ..camera import Camera
 from ..mesh import TetMesh
 from ..preintegrate import PreintegrationTable, table_for
 from ..settings import RenderSettings
-from ..sort import visibility_order
+from ..sort import sort_with_stats
 from ..transfer import TransferFunction
 from .context import create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
@@ -39,6 +39,7 @@ class FrameStats:
 
     n_tets: int = 0
     size: tuple[int, int] = (0, 0)
+    cycle_breaks: int = 0  # visibility cycles the sort had to break (MPVONC)
     upload: float = 0.0
     classify: float = 0.0
     sort: float = 0.0
@@ -328,8 +329,10 @@ class Renderer:
         self._use_table(table)
         self._clock.lap("table")
         uniforms = self._view_uniforms(mesh, camera, size)
+        cycle_breaks = 0
         if order is None:
-            order_ids = visibility_order(mesh, camera, self.settings.sort)
+            order_ids, sort_stats = sort_with_stats(mesh, camera, self.settings.sort)
+            cycle_breaks = sort_stats.n_cycle_breaks
         else:
             order_ids = np.asarray(order)
             if order_ids.shape != (mesh.n_tets,) or order_ids.dtype.kind not in "iu":
@@ -353,7 +356,7 @@ class Renderer:
             self._table_tex.use(0)
             self._draw(prog, fbo, n, ((moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA), moderngl.FUNC_ADD))
         image = self._read(fbo, size, 4, fb_dtype)
-        self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, **self._clock.laps)
+        self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, cycle_breaks=cycle_breaks, **self._clock.laps)
         return image
 
     def depth_extent(self, mesh: TetMesh, camera: Camera, *, size: tuple[int, int] = (512, 512)
