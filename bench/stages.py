@@ -419,6 +419,9 @@ def plot(res: dict[str, Any], path: Path) -> None:
         ns = np.array([int(k) for k in tab])
         ts = np.array([v["median"] for v in tab.values()])
         ax.loglog(ns, ts, "o-", color="#4c72b0", label=f"build_table, {TABLE_SLICES} slices, float32")
+        cpu = np.array([v.get("cpu_median", np.nan) for v in tab.values()])
+        if np.all(np.isfinite(cpu)):
+            ax.loglog(ns, cpu, "o--", color="#4c72b0", mfc="none", label="same, process CPU time")
         for n, t in zip(ns, ts):
             ax.annotate(f"{t:.2f} s", (n, t), textcoords="offset points", xytext=(6, -12), fontsize=9)
         ref = ts[0] * (ns / ns[0]) ** 2

@@ -14,6 +14,9 @@ from .render import render
 from .scene import Scene, demo_scene_path, load_scene
 from .settings import RenderSettings
 from .transfer import PRESETS, TransferFunction
+from .volume import Volume, read_volume
+from .raycast_reference import RaycastSettings
+from .fuse import FUSION_MODES, RayTextures, fuse
 
 __version__ = "0.1.0"
 
@@ -24,7 +27,14 @@ __all__ = [
     "RenderSettings",
     "TetMesh",
     "TransferFunction",
+    "FUSION_MODES",
+    "RayTextures",
+    "RaycastSettings",
+    "Raycaster",
     "Renderer",
+    "Volume",
+    "fuse",
+    "read_volume",
     "Scene",
     "demo_scene_path",
     "load_scene",
@@ -43,4 +53,8 @@ def __getattr__(name: str):
         from .gl.renderer import Renderer
 
         return Renderer
+    if name == "Raycaster":
+        from .gl.raycaster import Raycaster
+
+        return Raycaster
     raise AttributeError(f"module 'tetvr' has no attribute {name!r}")

@@ -462,7 +462,7 @@ assert tuple(_MODES) == RAYCAST_MODES
 
 def _refine(volume: Volume, o_idx: Float, d_idx: Float, ta: Float, tb: Float, sa: Float, sb: Float, iso: float,
             interpolation: str) -> Float:
-    """Bisection on the trilinear field inside a bracketing step, then a final linear
+    """Bisection on the reconstructed field inside a bracketing step, then a final linear
     interpolation (the shader does the same)."""
     below_a = sa < iso
     for _ in range(ISO_REFINE_STEPS):

@@ -5,7 +5,7 @@
 
 from .context import GLUnavailableError
 
-__all__ = ["GLUnavailableError", "Renderer"]
+__all__ = ["GLUnavailableError", "Raycaster", "Renderer"]
 
 
 def __getattr__(name: str):  # deferred so that `import tetvr.gl` stays cheap
@@ -13,4 +13,8 @@ def __getattr__(name: str):  # deferred so that `import tetvr.gl` stays cheap
         from .renderer import Renderer
 
         return Renderer
+    if name == "Raycaster":
+        from .raycaster import Raycaster
+
+        return Raycaster
     raise AttributeError(name)

@@ -108,6 +108,9 @@ class Renderer:
         """Release every GL object and the context. Safe to call twice."""
         if self._released:
             return
+        # Creating another context (a Raycaster, a second Renderer) makes it current:
+        # enter ours so that the releases below reach it.
+        self.ctx.__enter__()
         for obj in self._gl_objects():
             obj.release()
         self._programs.clear()
@@ -322,6 +325,11 @@ class Renderer:
         -------
         (height, width, 4) float32 premultiplied RGBA, row 0 at the top.
         """
+        with self.ctx:  # ours may not be current: another context may have been made since
+            return self._render(mesh, camera, tf, size, order, shader)
+
+    def _render(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, size: tuple[int, int],
+                order: NDArray[np.integer[Any]] | None, shader: str) -> NDArray[np.float32]:
         import moderngl
 
         size = self._check(size)
@@ -367,6 +375,11 @@ class Renderer:
         clipping range; ``+inf`` / ``-inf`` where no tet covers the pixel. These are the ray
         limits for fusing the mesh with a ray-cast volume (:mod:`tetvr.fuse`).
         """
+        with self.ctx:
+            return self._depth_extent(mesh, camera, size)
+
+    def _depth_extent(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]
+                      ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         import moderngl
 
         size = self._check(size)
