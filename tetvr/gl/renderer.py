@@ -325,6 +325,8 @@ class Renderer:
         -------
         (height, width, 4) float32 premultiplied RGBA, row 0 at the top.
         """
+        if self._released:
+            raise RuntimeError("this Renderer has been released")
         with self.ctx:  # ours may not be current: another context may have been made since
             return self._render(mesh, camera, tf, size, order, shader)
 
@@ -375,6 +377,8 @@ class Renderer:
         clipping range; ``+inf`` / ``-inf`` where no tet covers the pixel. These are the ray
         limits for fusing the mesh with a ray-cast volume (:mod:`tetvr.fuse`).
         """
+        if self._released:
+            raise RuntimeError("this Renderer has been released")
         with self.ctx:
             return self._depth_extent(mesh, camera, size)
 
