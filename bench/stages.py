@@ -186,7 +186,7 @@ def _frame(renderer: Any, mesh: TetMesh, cam: Camera, tf: Any, shader: str) -> t
     stages["total"] = sum(stages[k] for k in VIEW_STAGES)
     # CPU seconds of the whole process (llvmpipe's raster threads included). On a software
     # rasteriser this is the work done; wall time also counts waiting for cores that other
-    # processes hold, so cpu / wall well below the core count flags a contended run.
+    # processes hold, so cpu / wall well below 1 flags a contended run.
     stages["cpu"] = time.process_time() - c0
     return stages, wall, image
 
@@ -321,7 +321,7 @@ def print_table(res: dict[str, Any]) -> None:
         print(f"\nper-view stage medians at {SIZE[0]}x{SIZE[1]}, ms.  upload/table: first frame only; floor: total of "
               f"the floor shader;\ngeom: floor draw at {GEOMETRY_SIZE[0]}x{GEOMETRY_SIZE[1]} (no fill); "
               "cpu/fl: process-CPU-time ratio tet/floor;\nwall: whole render() with profile=False; "
-              f"util: CPU s per wall s (cores busy for us; {os.cpu_count()} here)")
+              f"util: CPU s per wall s (< 1: other processes held the cores; {os.cpu_count()} cores here)")
         print(head)
         print("-" * len(head))
         for m in meshes:
@@ -510,7 +510,8 @@ def main(argv: list[str] | None = None) -> int:
             "wall_median.tet_unprofiled": "wall time of render() with profile=False (no per-stage glFinish)",
             "ratio": "median tet / median floor; ratio_paired: median of per-repeat tet / floor",
             "cpu": "process CPU seconds of the frame (all threads; llvmpipe rasterises on the CPU)",
-            "cpu_utilisation": "median cpu / wall per frame; about the core count when nothing else competes",
+            "cpu_utilisation": ("median cpu / wall per frame; llvmpipe shades vertices and bins on one thread and "
+                                "rasterises on all cores, so 1..cores when nothing competes; well below 1: contended"),
             "cpu_median": "table and sort: median process CPU seconds (both run on one thread)",
             "geometry_floor_draw": f"draw stage of the floor shader at {GEOMETRY_SIZE}: the non-fill part of draw",
         },

@@ -59,3 +59,20 @@ def test_wheel_renders_from_outside_the_source_tree(tmp_path):
             "img = tetvr.render(s.mesh, camera=s.camera, tf=s.tf, size=(32, 24));"
             "assert img[..., 3].max() > 0.1" % (site, site))
     subprocess.run([sys.executable, "-c", code], check=True, cwd=tmp_path, env={"PYTHONPATH": str(site), "PATH": ""})
+
+
+@pytest.mark.gl
+def test_cli_fusion_demo(tmp_path):
+    assert main(["fusion-demo", "-o", str(tmp_path), "--size", "64", "48"]) == 0
+    for name in ("fusion_interleave", "fusion_overlay", "fusion_cutaway", "fusion_ray_textures", "fusion_modes"):
+        assert (tmp_path / f"{name}.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_image_cells_to_tets_lines_up_with_the_volume():
+    from tetvr.examples import carotid_fusion
+
+    scene = carotid_fusion()
+    # Every mesh point is a voxel centre carrying that voxel's value.
+    values = scene.volume.sample(scene.mesh.points)
+    np.testing.assert_allclose(values, scene.mesh.scalars, rtol=1e-6)
+    assert scene.mesh.scalar_range[0] > 175.0

@@ -31,6 +31,38 @@ def _render_scene(scene_path: str, out: str, npy: str | None, method: str) -> in
     return 0
 
 
+def _fusion_demo(out: Path, size: tuple[int, int]) -> int:
+    from . import FUSION_MODES
+    from .examples import carotid_fusion
+    from .fuse import RayTextures, fuse
+    from .gl.raycaster import Raycaster
+    from .gl.renderer import Renderer
+    from .image import write_png
+
+    out.mkdir(parents=True, exist_ok=True)
+    scene = carotid_fusion()
+    w, h = size
+    # Ray textures: the left half shows the volume's front half only, the right half all of it.
+    end = np.ones((h, w))
+    end[:, : w // 2] = 0.5
+    textures = RayTextures(np.zeros((h, w)), end)
+    panels = []
+    with Renderer() as r, Raycaster(ctx=r.ctx) as rc:
+        for mode in FUSION_MODES:
+            img = fuse(scene.mesh, scene.volume, scene.camera, scene.mesh_tf, scene.volume_tf, size=size, mode=mode,
+                       renderer=r, raycaster=rc, ray_textures=textures if mode == "ray_textures" else None)
+            write_png(img, out / f"fusion_{mode}.png", background=(0, 0, 0))
+            panels.append(img)
+        write_png(r.render(scene.mesh, scene.camera, scene.mesh_tf, size=size), out / "mesh_only.png", background=(0, 0, 0))
+        write_png(rc.render(scene.volume, scene.camera, scene.volume_tf, size=size), out / "volume_only.png",
+                  background=(0, 0, 0))
+    grid = np.concatenate([np.concatenate(panels[:2], axis=1), np.concatenate(panels[2:], axis=1)], axis=0)
+    write_png(grid, out / "fusion_modes.png", background=(0, 0, 0))
+    print(f"{scene.mesh.n_tets} tets in a {scene.volume.dims} volume: wrote {', '.join(FUSION_MODES)} "
+          f"(fusion_modes.png: {FUSION_MODES[0]}, {FUSION_MODES[1]} / {FUSION_MODES[2]}, {FUSION_MODES[3]}) to {out}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="tetvr", description="Volume rendering of tetrahedral meshes.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -41,6 +73,9 @@ def main(argv: list[str] | None = None) -> int:
     p_render.add_argument("--reference", action="store_true", help="use the exact CPU reference renderer")
     p_demo = sub.add_parser("demo", help="render the bundled demo scene")
     p_demo.add_argument("-o", "--output", default="demo.png", help="PNG to write (default: ./demo.png)")
+    p_fusion = sub.add_parser("fusion-demo", help="render the bundled vessel-flow fusion demo in every mode")
+    p_fusion.add_argument("-o", "--output", default="fusion", help="folder for the PNGs (default: ./fusion)")
+    p_fusion.add_argument("--size", type=int, nargs=2, default=(480, 360), metavar=("W", "H"))
     p_info = sub.add_parser("info", help="describe a mesh file and the OpenGL context")
     p_info.add_argument("mesh")
     args = parser.parse_args(argv)
@@ -52,6 +87,8 @@ def main(argv: list[str] | None = None) -> int:
             from .scene import demo_scene_path
 
             return _render_scene(str(demo_scene_path()), args.output, None, "gpu")
+        if args.command == "fusion-demo":
+            return _fusion_demo(Path(args.output), tuple(args.size))
         if args.command == "info":
             from .mesh import read
 

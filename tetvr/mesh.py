@@ -155,7 +155,7 @@ class TetMesh:
         """(2, 3) min and max corner of the bounding box."""
         return np.stack([self.points.min(axis=0), self.points.max(axis=0)])
 
-    @property
+    @cached_property
     def scalar_range(self) -> tuple[float, float]:
         return float(self.scalars.min()), float(self.scalars.max())
 

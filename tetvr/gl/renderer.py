@@ -45,12 +45,14 @@ class FrameStats:
     sort: float = 0.0
     order_upload: float = 0.0
     table: float = 0.0
+    setup: float = 0.0  # program choice, uniforms, target clear
     draw: float = 0.0
     readback: float = 0.0
 
     @property
     def total(self) -> float:
-        return self.upload + self.classify + self.sort + self.order_upload + self.table + self.draw + self.readback
+        return (self.upload + self.classify + self.sort + self.order_upload + self.table + self.setup + self.draw
+                + self.readback)
 
 
 class Renderer:
@@ -361,6 +363,7 @@ class Renderer:
         fbo = self._use_target(size, 4, fb_dtype)
         fbo.use()
         fbo.clear(0.0, 0.0, 0.0, 0.0)
+        self._clock.lap("setup")
         for n in self._chunks(mesh, order_ids):
             self._classify(n, uniforms)
             self._table_tex.use(0)
