@@ -53,8 +53,27 @@ void main() {
         return;
     }
     if (behind) {
+        // Crosses the near plane: drawn as a screen rectangle bounding the part of the tet
+        // beyond the near plane (its vertices there, and where its edges cross the plane),
+        // each fragment intersecting its ray with the tet exactly.
+        vec2 lo = vec2(1e30), hi = vec2(-1e30);
+        for (int a = 0; a < 4; ++a) {
+            float da = -p_eye[a].z - u_near;
+            if (da >= 0.0) {
+                lo = min(lo, p_ndc[a]); hi = max(hi, p_ndc[a]);
+            }
+            for (int b = a + 1; b < 4; ++b) {
+                float db = -p_eye[b].z - u_near;
+                if ((da < 0.0) != (db < 0.0)) {
+                    vec3 q = mix(p_eye[a], p_eye[b], da / (da - db));
+                    vec4 c = u_proj * vec4(q, 1.0);
+                    vec2 n = c.xy / c.w;
+                    lo = min(lo, n); hi = max(hi, n);
+                }
+            }
+        }
         fan.ids = ivec4(-1 - t);
-        fan.front = vec4(0.0);
+        fan.front = vec4(clamp(lo, -1.0, 1.0), clamp(hi, -1.0, 1.0));
         fan.back = vec4(0.0);
         fans[t] = fan;
         return;

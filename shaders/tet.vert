@@ -34,9 +34,11 @@ void main() {
         return;
     }
     if (fan.ids.x < 0) {
-        // Crosses the near plane: a full-screen quad (corners 0-5), the rest degenerate.
-        const vec2 quad[6] = vec2[6](vec2(-1, -1), vec2(1, -1), vec2(1, 1), vec2(-1, -1), vec2(1, 1), vec2(-1, 1));
-        gl_Position = corner < 6 ? vec4(quad[corner], 0.0, 1.0) : vec4(2.0, 2.0, 0.0, 1.0);
+        // Crosses the near plane: the screen rectangle classify.comp bounded it by
+        // (corners 0-5; fan.front = (x_lo, y_lo, x_hi, y_hi) in NDC), the rest degenerate.
+        const ivec2 quad[6] = ivec2[6](ivec2(0, 0), ivec2(1, 0), ivec2(1, 1), ivec2(0, 0), ivec2(1, 1), ivec2(0, 1));
+        vec2 xy = corner < 6 ? mix(fan.front.xy, fan.front.zw, vec2(quad[min(corner, 5)])) : vec2(2.0);
+        gl_Position = vec4(xy, 0.0, 1.0);
         v_exact_tet = -1 - fan.ids.x;
         v_front = vec4(0.0); v_back = vec4(0.0); v_scalar = vec2(0.0);
         return;

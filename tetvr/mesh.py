@@ -9,7 +9,9 @@ identical objects, and render identically.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import io
 import os
 import warnings
 from functools import cached_property
@@ -83,7 +85,10 @@ class TetMesh:
         if not np.all(np.isfinite(pts)):
             bad = np.argwhere(~np.isfinite(pts))[0]
             raise ValueError(f"points contain NaN or Inf (first at point {bad[0]}: {pts[bad[0]].tolist()})")
-        t = np.asarray(tets)
+        try:
+            t = np.asarray(tets)
+        except ValueError as exc:  # ragged nested sequences
+            raise ValueError(f"tets must be a rectangular integer array: {exc}") from None
         if t.dtype.kind not in "iu":
             if t.dtype.kind == "f" and t.size and np.all(t == np.round(t)):
                 t = t.astype(np.int64)
@@ -106,8 +111,14 @@ class TetMesh:
         if np.any(t[:, :-1] == t[:, 1:]):
             bad = int(np.nonzero(np.any(t[:, :-1] == t[:, 1:], axis=1))[0][0])
             raise ValueError(f"tet {bad} repeats a vertex: {np.asarray(tets)[bad].tolist()}")
-        vol6 = _signed_volume6(pts, t)
-        edge = _max_edge(pts, t)
+        with np.errstate(over="ignore", invalid="ignore"):
+            vol6 = _signed_volume6(pts, t)
+            edge = _max_edge(pts, t)
+        if not (np.all(np.isfinite(vol6)) and np.all(np.isfinite(edge))):
+            raise ValueError(
+                f"points are too large for float64 geometry (largest |coordinate| {float(np.abs(pts).max()):.3g}): "
+                "tetrahedron volumes overflow; rescale the mesh"
+            )
         flat = np.abs(vol6) <= _FLAT_RELATIVE_VOLUME * edge**3
         dropped = int(flat.sum())
         if dropped:
@@ -162,14 +173,19 @@ class TetMesh:
     def with_scalars(self, scalars: ArrayLike, name: str = "scalars") -> "TetMesh":
         """The same geometry with another point field."""
         s = _as_float_array(scalars, "scalars")
-        if s.shape != self.scalars.shape or not np.all(np.isfinite(s)):
-            raise ValueError(f"scalars must be {self.scalars.shape[0]} finite values, got shape {s.shape}")
+        if s.shape != self.scalars.shape:
+            raise ValueError(f"scalars must have one value per point ({self.scalars.shape[0]}), got shape {s.shape}")
+        if not np.all(np.isfinite(s)):
+            raise ValueError(f"scalars contain {int(np.sum(~np.isfinite(s)))} NaN or Inf values")
         s.setflags(write=False)
         return dataclasses.replace(self, scalars=s, scalar_name=name)
 
 
 def _as_float_array(value: ArrayLike, name: str) -> NDArray[np.float64]:
-    arr = np.asarray(value)
+    try:
+        arr = np.asarray(value)
+    except ValueError as exc:  # ragged nested sequences
+        raise ValueError(f"{name} must be a rectangular numeric array: {exc}") from None
     if arr.dtype.kind == "c":
         raise TypeError(f"{name} must be real, got complex dtype {arr.dtype}")
     if arr.dtype.kind not in "fiub":
@@ -192,6 +208,8 @@ def _field_to_scalar(values: NDArray[Any], name: str, component: int | None) -> 
     v = np.asarray(values)
     if v.ndim == 2 and v.shape[1] == 1:
         v = v[:, 0]
+    if v.ndim == 1 and component not in (None, 0):
+        raise ValueError(f"field {name!r} is a scalar field; component {component} is out of range")
     if v.ndim == 2:
         if component is None:
             return np.linalg.norm(v.astype(np.float64), axis=1)
@@ -224,15 +242,18 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
     --------
     >>> mesh = read(demo_mesh_path(), "Pressure")  # doctest: +SKIP
     """
-    import meshio  # deferred: importing meshio costs ~0.3 s
-
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FileNotFoundError(f"mesh file not found: {path}")
-    try:
-        m = meshio.read(path)
-    except Exception as exc:  # meshio raises many kinds for corrupt files
-        raise ValueError(f"cannot read mesh file {path!r}: {type(exc).__name__}: {exc}") from exc
+    if os.path.isdir(path):
+        raise ValueError(f"cannot read mesh file {path!r}: it is a directory")
+    if os.path.getsize(path) == 0:
+        raise ValueError(f"cannot read mesh file {path!r}: the file is empty")
+    if scalars is not None and not isinstance(scalars, str):
+        raise TypeError(f"scalars must be a field name (str) or None, got {scalars!r}")
+    if component is not None and (isinstance(component, bool) or not isinstance(component, (int, np.integer))):
+        raise TypeError(f"component must be an integer or None, got {component!r}")
+    m = _meshio_read(path)
 
     tet_blocks = [i for i, c in enumerate(m.cells) if c.type == "tetra"]
     ignored: dict[str, int] = {}
@@ -273,6 +294,94 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
     mesh = TetMesh.from_arrays(m.points, tets, values, scalar_name=scalars)
     report = dataclasses.replace(mesh.report, ignored_cells=tuple(ignored.items()), scalar_source=source)
     return dataclasses.replace(mesh, report=report)
+
+
+# meshio readers that loop forever at an unexpected end of file, and the mode they open
+# the file in: they are handed a file object that raises there instead.
+_LOOPS_AT_EOF = {"tecplot": "r", "mdpa": "rb"}
+# Consecutive empty reads at the end of a file before it counts as such a loop.
+_EOF_READS = 1000
+
+
+class _EOFGuard:
+    """Mixin for file objects: readline() raises after returning "" too many times."""
+
+    _eof_reads = 0
+
+    def readline(self, *args: Any) -> Any:
+        line = super().readline(*args)  # type: ignore[misc]
+        self._eof_reads = 0 if line else self._eof_reads + 1
+        if self._eof_reads > _EOF_READS:
+            raise EOFError("unexpected end of file (the file is truncated)")
+        return line
+
+
+class _GuardedBytes(_EOFGuard, io.BufferedReader):
+    pass
+
+
+class _GuardedText(_EOFGuard, io.TextIOWrapper):
+    pass
+
+
+def _meshio_formats(path: str) -> list[str]:
+    """The meshio formats a file name can be, as meshio itself deduces them."""
+    import meshio
+
+    ext, formats = "", []
+    for suffix in reversed(os.path.basename(path).split(".")[1:]):
+        ext = ("." + suffix + ext).lower()
+        formats += meshio.extension_to_filetypes.get(ext, [])
+    if not formats:
+        known = ", ".join(sorted(meshio.extension_to_filetypes))
+        what = f"extension {os.path.splitext(path)[1]!r}" if os.path.splitext(path)[1] else "no file extension"
+        raise ValueError(f"cannot read mesh file {path!r}: unknown format ({what}); known extensions: {known}")
+    return formats
+
+
+def _tetgen_has_header(path: str) -> None:
+    # meshio's TetGen reader skips blank and comment lines without checking for the end.
+    stem = os.path.splitext(path)[0]
+    for name in (stem + ".node", stem + ".ele"):
+        with open(name, "rb") as f:
+            if not any(line.strip() and not line.lstrip().startswith(b"#") for line in f):
+                raise EOFError(f"{name!r} has no header line")
+
+
+def _meshio_read(path: str) -> Any:
+    """``meshio.read`` made safe for corrupt files: any failure is a ValueError naming the file.
+
+    meshio prints its reason and calls ``sys.exit(1)`` when a reader rejects a file, and a
+    few of its text readers never return on a truncated one; its console output is
+    captured into the error (or, after a successful read, re-issued as a warning).
+    """
+    import meshio  # deferred: importing meshio costs ~0.3 s
+
+    failures = []
+    for fmt in _meshio_formats(path):
+        chatter = io.StringIO()
+        try:
+            with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+                if fmt == "tetgen":
+                    _tetgen_has_header(path)
+                if fmt in _LOOPS_AT_EOF:
+                    raw = io.FileIO(path, "r")
+                    f: Any = _GuardedBytes(raw) if _LOOPS_AT_EOF[fmt] == "rb" else _GuardedText(io.BufferedReader(raw))
+                    with f:
+                        m = meshio.read(f, file_format=fmt)
+                else:
+                    m = meshio.read(path, file_format=fmt)
+        except (Exception, SystemExit) as exc:  # SystemExit: meshio exits when a reader rejects a file
+            said = [ln.strip() for ln in chatter.getvalue().splitlines()
+                    if ln.strip() and "Couldn't read file" not in ln]
+            why = f"{type(exc).__name__}: {exc}" if not isinstance(exc, SystemExit) else "rejected"
+            failures.append(f"as {fmt}: " + "; ".join(said + [why]))
+            continue
+        said_ok = " ".join(chatter.getvalue().split())
+        if said_ok:
+            warnings.warn(f"meshio reading {path!r}: {said_ok}", stacklevel=3)
+        return m
+    raise ValueError(f"cannot read mesh file {path!r}: " + " | ".join(failures))
 
 
 def _cell_to_point(points: NDArray[np.float64], tets: NDArray[np.int64], values: NDArray[np.float64]) -> NDArray[np.float64]:
