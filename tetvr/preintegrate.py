@@ -47,7 +47,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from .optics import MAX_OPACITY, mean_neg_log
+from .optics import MAX_OPACITY, OPTICS, mean_neg_log
 from .transfer import TransferFunction
 
 __all__ = ["PreintegrationTable", "build_table", "table_for"]
@@ -141,6 +141,7 @@ def table_for(
     log_base: float = 2.0,
     encoding: str = "normalized",
     dtype: str = "float32",
+    optics: str = "exact",
 ) -> PreintegrationTable:
     """The table for a transfer function and a mesh, from a cache keyed by all inputs.
 
@@ -155,14 +156,14 @@ def table_for(
         lo, hi = lo - pad, hi + pad
     # Thicknesses are rounded up to 7 significant digits so near-equal meshes share a table.
     d_top = float(f"{d_max * (1 + 1e-6):.7g}")
-    return _cached(tf, (lo, hi), d_top, n_bins, n_slices, float(log_base), encoding, dtype)
+    return _cached(tf, (lo, hi), d_top, n_bins, n_slices, float(log_base), encoding, dtype, optics)
 
 
 @functools.lru_cache(maxsize=8)
 def _cached(tf: TransferFunction, scalar_range: tuple[float, float], d_max: float, n_bins: int,
-            n_slices: int, log_base: float, encoding: str, dtype: str) -> PreintegrationTable:
+            n_slices: int, log_base: float, encoding: str, dtype: str, optics: str = "exact") -> PreintegrationTable:
     return build_table(tf, scalar_range, d_max, n_bins=n_bins, n_slices=n_slices, log_base=log_base,
-                       encoding=encoding, dtype=dtype)
+                       encoding=encoding, dtype=dtype, optics=optics)
 
 
 def build_table(
@@ -175,6 +176,7 @@ def build_table(
     log_base: float = 2.0,
     encoding: str = "normalized",
     dtype: str = "float32",
+    optics: str = "exact",
 ) -> PreintegrationTable:
     """Build a pre-integration table (no cache; see :func:`table_for`).
 
@@ -187,6 +189,9 @@ def build_table(
     n_slices : K non-zero thickness slices, ``d_max * log_base**(k - K + 1)``.
     encoding : "normalized" or "premultiplied" (see the module notes).
     dtype : "float32" or "uint8".
+    optics : "exact" (``tau = -ln(1 - a)/u``), "linear" (``tau = a/u``, VTK's unstructured
+        mappers) or "vtk" (``tau = a/u`` and the mean of the end colours, unattenuated: the
+        fragment formula of VTK's projected tetrahedra); see :data:`tetvr.optics.OPTICS`.
 
     Examples
     --------
@@ -210,9 +215,15 @@ def build_table(
     nodes = np.linspace(lo, hi, n_bins)
     ds = (hi - lo) / (n_bins - 1)
     color, opacity = tf.evaluate(nodes)
-    x = 1.0 - np.clip(opacity, 0.0, MAX_OPACITY)
-    tau_node = -np.log(x) / u
-    tau_bin = mean_neg_log(x[:-1], x[1:]) / u  # exact mean extinction over each bin
+    if optics not in OPTICS:
+        raise ValueError(f"optics must be one of {OPTICS}, got {optics!r}")
+    if optics == "exact":
+        x = 1.0 - np.clip(opacity, 0.0, MAX_OPACITY)
+        tau_node = -np.log(x) / u
+        tau_bin = mean_neg_log(x[:-1], x[1:]) / u  # exact mean extinction over each bin
+    else:  # tau = a/u is linear in the scalar between nodes: its bin mean is the midpoint
+        tau_node = np.clip(opacity, 0.0, 1.0) / u
+        tau_bin = 0.5 * (tau_node[:-1] + tau_node[1:])
     thick = d_max * log_base ** (np.arange(n_slices) - n_slices + 1.0)
 
     rgb = np.zeros((n_slices, n_bins, n_bins, 3))  # [k, sb, sf]
@@ -224,17 +235,23 @@ def build_table(
     mean_tau = np.where(span > 0, np.abs(prefix[None, :] - prefix[:, None]) / np.maximum(span, 1), tau_node[None, :])
     mean_tau = mean_tau.T  # now indexed [sb, sf]: prefix difference is symmetric, diagonal by sf
     mean_tau[i_idx, i_idx] = tau_node
+    if optics == "vtk":  # VTK's PT: the mean of the two ends, not of the segment
+        mean_tau = 0.5 * (tau_node[None, :] + tau_node[:, None])
+        mean_color = 0.5 * (color[None, :, :] + color[:, None, :])  # [sb, sf, 3]
     theta[:] = thick[:, None, None] * mean_tau[None]
 
-    # Diagonal: constant scalar, closed form.
-    rgb[:, i_idx, i_idx, :] = color[None] * (-np.expm1(-thick[:, None] * tau_node[None]))[..., None]
-    # Off-diagonal: the incremental recurrence, forwards (sb > sf) and on the mirrored axis.
-    fwd = _diagonal_runs(color, tau_bin, thick)  # [k, n, i] -> entry (sf=i, sb=i+n)
-    bwd = _diagonal_runs(color[::-1], tau_bin[::-1], thick)  # mirrored: sf=N-1-i, sb=N-1-i-n
-    for n in range(1, n_bins):
-        i = np.arange(n_bins - n)
-        rgb[:, i + n, i, :] = fwd[:, n, : n_bins - n]
-        rgb[:, n_bins - 1 - i - n, n_bins - 1 - i, :] = bwd[:, n, : n_bins - n]
+    if optics == "vtk":
+        rgb[:] = mean_color[None] * (-np.expm1(-theta))[..., None]
+    else:
+        # Diagonal: constant scalar, closed form.
+        rgb[:, i_idx, i_idx, :] = color[None] * (-np.expm1(-thick[:, None] * tau_node[None]))[..., None]
+        # Off-diagonal: the incremental recurrence, forwards (sb > sf) and on the mirrored axis.
+        fwd = _diagonal_runs(color, tau_bin, thick)  # [k, n, i] -> entry (sf=i, sb=i+n)
+        bwd = _diagonal_runs(color[::-1], tau_bin[::-1], thick)  # mirrored: sf=N-1-i, sb=N-1-i-n
+        for n in range(1, n_bins):
+            i = np.arange(n_bins - n)
+            rgb[:, i + n, i, :] = fwd[:, n, : n_bins - n]
+            rgb[:, n_bins - 1 - i - n, n_bins - 1 - i, :] = bwd[:, n, : n_bins - n]
     alpha = -np.expm1(-theta)
 
     table = np.zeros((n_slices + 1, n_bins, n_bins, 4))
@@ -247,7 +264,7 @@ def build_table(
             chroma = np.where(alpha[..., None] > 1e-300, rgb / alpha[..., None], 0.0)
         table[1:, ..., :3] = np.clip(chroma, 0.0, 1.0)
         table[:, ..., 3] = mean_tau[None]
-        table[0, ..., :3] = _thin_limit(color, tau_bin, tau_node)
+        table[0, ..., :3] = mean_color if optics == "vtk" else _thin_limit(color, tau_bin, tau_node)
         if dtype == "uint8":
             alpha_scale = float(max(mean_tau.max(), 1e-300))
             table[..., 3] /= alpha_scale

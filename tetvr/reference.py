@@ -52,14 +52,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Iterator, NamedTuple
+from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .camera import Camera
 from .mesh import TetMesh
-from .optics import _SUB_THETA, MAX_OPACITY, integrate_pieces, piece_optical_depth
+from .optics import _SUB_THETA, MAX_OPACITY, OPTICS, integrate_linear_pieces, integrate_pieces, piece_optical_depth, vtk_segments
 from .transfer import TransferFunction
 
 __all__ = [
@@ -420,7 +420,7 @@ def ray_segments(
 
 
 def integrate_segments(
-    scalar_in: Float, scalar_out: Float, length_world: Float, tf: TransferFunction
+    scalar_in: Float, scalar_out: Float, length_world: Float, tf: TransferFunction, *, optics: str = "exact"
 ) -> tuple[Float, Float]:
     """Integrate segments along which the scalar runs linearly.
 
@@ -433,6 +433,9 @@ def integrate_segments(
     scalar_in, scalar_out : (n,) scalar at the front and back of each segment.
     length_world : (n,) length of each segment in world units.
     tf : the transfer function.
+    optics : "exact" (``tau = -ln(1 - a)/u``), "linear" (``tau = a/u``, integrated exactly)
+        or "vtk" (VTK's projected-tetrahedra segment: mean end colour, not cut at
+        breakpoints); see :data:`tetvr.optics.OPTICS` and docs/paraview.md.
 
     Returns
     -------
@@ -455,10 +458,17 @@ def integrate_segments(
             f"{s_in.shape[0]}, {s_out.shape[0]}, {length.shape[0]}"
         )
     n = s_in.shape[0]
+    if optics not in OPTICS:
+        raise ValueError(f"optics must be one of {OPTICS}, got {optics!r}")
+    if optics == "vtk":  # one formula per segment, from its two ends only
+        c_in, o_in = tf.evaluate(s_in)
+        c_out, o_out = tf.evaluate(s_out)
+        return vtk_segments(c_in, c_out, o_in, o_out, length, tf.unit_distance)
     seg, s_a, s_b, piece_len = _split_at_breakpoints(s_in, s_out, length, tf.breakpoints)
     c_a, o_a = tf.evaluate(s_a)
     c_b, o_b = tf.evaluate(s_b)
-    rgb, theta = _integrate_batched(c_a, c_b, o_a, o_b, piece_len, tf.unit_distance)
+    rgb, theta = _integrate_batched(c_a, c_b, o_a, o_b, piece_len, tf.unit_distance,
+                                    integrate_linear_pieces if optics == "linear" else integrate_pieces)
     # Pieces are in ray order inside each segment, segments contiguous.
     excl = _exclusive_group_cumsum(theta, seg)
     w = np.exp(-excl)
@@ -505,7 +515,8 @@ def _split_at_breakpoints(
 
 
 def _integrate_batched(
-    c0: Float, c1: Float, a0: Float, a1: Float, length: Float, u: float
+    c0: Float, c1: Float, a0: Float, a1: Float, length: Float, u: float,
+    integrate: Callable[..., tuple[Float, Float]] = integrate_pieces,
 ) -> tuple[Float, Float]:
     """integrate_pieces in batches that bound its sub-piece temporaries.
 
@@ -526,7 +537,7 @@ def _integrate_batched(
             base = ends[start - 1] if start else 0.0
             stop = max(int(np.searchsorted(ends, base + _SUB_BUDGET, side="right")), start + 1)
             idx = group[start:stop]
-            rgb[idx], theta[idx] = integrate_pieces(c0[idx], c1[idx], a0[idx], a1[idx], length[idx], u)
+            rgb[idx], theta[idx] = integrate(c0[idx], c1[idx], a0[idx], a1[idx], length[idx], u)
             start = stop
     return rgb, theta
 
@@ -595,6 +606,7 @@ def render_reference(
     *,
     chunk: int = DEFAULT_CHUNK,
     progress: bool = False,
+    optics: str = "exact",
 ) -> NDArray[np.float32]:
     """Render the mesh exactly on the CPU.
 
@@ -608,6 +620,9 @@ def render_reference(
         ~200 bytes each (~50 MB at the default). Each segment found also keeps ~50 bytes
         until compositing (bluntfin, 187k tets at 256x256: 1.6M segments, 80 MB).
     progress : show a progress bar over the chunks (needs tqdm).
+    optics : the opacity convention, as ``RenderSettings.optics``: "exact" (default),
+        "linear" (``tau = a/u``) or "vtk" (VTK's projected-tetrahedra segment formula,
+        on exact geometry); see :func:`integrate_segments`.
 
     Returns
     -------
@@ -628,6 +643,8 @@ def render_reference(
     chunk = _check_chunk(chunk)
     if not isinstance(tf, TransferFunction):
         raise TypeError(f"tf must be a TransferFunction, got {type(tf).__name__}")
+    if optics not in OPTICS:
+        raise ValueError(f"optics must be one of {OPTICS}, got {optics!r}")
     rays = _EyeRays.from_camera(camera, width, height)
     norms = rays.norms()
     geo = _tet_geometry(mesh, camera, rays)
@@ -643,7 +660,7 @@ def render_reference(
     pixels, fronts, colours, depths = [], [], [], []
     for seg in chunks:
         length = (seg.t_out - seg.t_in) * norms[seg.pixel]
-        rgb, theta = integrate_segments(seg.scalar_in, seg.scalar_out, length, tf)
+        rgb, theta = integrate_segments(seg.scalar_in, seg.scalar_out, length, tf, optics=optics)
         pixels.append(seg.pixel)
         fronts.append(seg.t_in)
         colours.append(rgb)

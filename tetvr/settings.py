@@ -5,6 +5,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Literal
 
+from .optics import OPTICS
+
 __all__ = ["RenderSettings", "SORT_METHODS", "TABLE_ENCODINGS", "TABLE_DTYPES"]
 
 #: Visibility orderings (see :mod:`tetvr.sort`).
@@ -39,6 +41,12 @@ class RenderSettings:
         perspective-correctly (Kraus et al. 2004) rather than linearly in screen space.
     framebuffer : ``"float32"`` compositing target, or ``"uint8"`` (what 8-bit
         renderers such as VTK's do; for measuring what float compositing buys).
+    optics : how transfer-function opacity becomes light (:data:`tetvr.optics.OPTICS`):
+        ``"exact"`` (``tau = -ln(1 - a)/u``, the default), ``"linear"`` (``tau = a/u``, the
+        convention of VTK's unstructured-grid mappers, integrated exactly) or ``"vtk"``
+        (``tau = a/u`` and the mean of a segment's end colours, VTK's projected-tetrahedra
+        fragment formula). ``tetvr.vtkcompare.PARITY_SETTINGS`` pairs ``"vtk"`` with VTK's
+        screen-linear interpolation; see docs/paraview.md.
 
     Examples
     --------
@@ -54,6 +62,7 @@ class RenderSettings:
     table_encoding: Literal["normalized", "premultiplied"] = "normalized"
     perspective_correct: bool = True
     framebuffer: Literal["float32", "uint8"] = "float32"
+    optics: Literal["exact", "linear", "vtk"] = "exact"
 
     def __post_init__(self) -> None:
         if self.sort not in SORT_METHODS:
@@ -62,6 +71,8 @@ class RenderSettings:
             raise ValueError(f"table_encoding must be one of {TABLE_ENCODINGS}, got {self.table_encoding!r}")
         if self.framebuffer not in FRAMEBUFFERS:
             raise ValueError(f"framebuffer must be one of {FRAMEBUFFERS}, got {self.framebuffer!r}")
+        if self.optics not in OPTICS:
+            raise ValueError(f"optics must be one of {OPTICS}, got {self.optics!r}")
         if self.table_dtype not in TABLE_DTYPES:
             raise ValueError(f"table_dtype must be one of {TABLE_DTYPES}, got {self.table_dtype!r}")
         for name, lo, hi in (("table_scalar_bins", 2, 2048), ("table_thickness_slices", 1, 256)):

@@ -248,7 +248,7 @@ class Renderer:
         s = self.settings
         return table_for(tf, mesh.scalar_range, mesh.max_edge, n_bins=s.table_scalar_bins,
                          n_slices=s.table_thickness_slices, log_base=s.table_log_base,
-                         encoding=s.table_encoding, dtype=s.table_dtype)
+                         encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics)
 
     def _view_uniforms(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> dict[str, Any]:
         """Upload the mesh if new; the uniforms of this view."""
