@@ -45,6 +45,8 @@ def variants() -> dict[str, RenderSettings]:
     v["screen-linear interpolation"] = dataclasses.replace(DEFAULT, perspective_correct=False)
     v["premultiplied table"] = dataclasses.replace(DEFAULT, table_encoding="premultiplied")
     v["uint8 table"] = dataclasses.replace(DEFAULT, table_dtype="uint8")
+    v["cubic thickness filter"] = dataclasses.replace(DEFAULT, table_filter="cubic")
+    v["premultiplied table, cubic"] = dataclasses.replace(DEFAULT, table_encoding="premultiplied", table_filter="cubic")
     v["uint8 framebuffer"] = dataclasses.replace(DEFAULT, framebuffer="uint8")
     for n in (64, 128, 512):
         v[f"N={n}"] = dataclasses.replace(DEFAULT, table_scalar_bins=n)

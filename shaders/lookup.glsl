@@ -2,7 +2,7 @@
 //
 // Table: sampler3D with width = front scalar, height = back scalar, depth = thickness
 // slice (slice 0 = zero thickness, slices 1..K = u_d_min * u_log_base^(k-1)), linear
-// filtering. TABLE_NORMALIZED 1: RGB = colour per unit alpha, A = mean extinction, so
+// filtering (TABLE_CUBIC 1: Catmull-Rom across slices instead). TABLE_NORMALIZED 1: RGB = colour per unit alpha, A = mean extinction, so
 // alpha = 1 - exp(-d A) is exact in d; 0: premultiplied RGBA (Kraus et al. 2004).
 // Returns premultiplied RGBA.
 
@@ -18,12 +18,26 @@ vec4 lookup_segment(float sf, float sb, float d) {
     float slice = d < u_d_min ? d / u_d_min : 1.0 + log(d / u_d_min) * u_inv_log_base;
     slice = clamp(slice, 0.0, u_table_size.z - 1.0);
     // Node i sits at texel centre (i + 0.5) / size.
-    vec3 coord = (vec3(s * (u_table_size.xy - 1.0), slice) + 0.5) / u_table_size;
-    vec4 t = texture(u_table, coord);
+    vec2 st = (s * (u_table_size.xy - 1.0) + 0.5) / u_table_size.xy;
+#if defined(TABLE_CUBIC) && TABLE_CUBIC
+    // Catmull-Rom along the thickness axis: four slices, each read at its texel centre.
+    float k0 = floor(slice), f = slice - k0;
+    vec4 w = 0.5 * vec4(((-f + 2.0) * f - 1.0) * f, (3.0 * f - 5.0) * f * f + 2.0,
+                        ((-3.0 * f + 4.0) * f + 1.0) * f, (f - 1.0) * f * f);
+    vec4 t = vec4(0.0);
+    for (int i = 0; i < 4; ++i) {
+        float k = clamp(k0 + float(i - 1), 0.0, u_table_size.z - 1.0);
+        t += w[i] * texture(u_table, vec3(st, (k + 0.5) / u_table_size.z));
+    }
+    t = max(t, 0.0);
+#else
+    vec4 t = texture(u_table, vec3(st, (slice + 0.5) / u_table_size.z));
+#endif
 #if TABLE_NORMALIZED
+    t.rgb = min(t.rgb, 1.0);
     float alpha = 1.0 - exp(-d * t.a * u_alpha_scale);
     return vec4(t.rgb * alpha, alpha);
 #else
-    return t;
+    return vec4(min(t.rgb, vec3(t.a)), min(t.a, 1.0));
 #endif
 }

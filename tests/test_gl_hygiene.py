@@ -18,8 +18,8 @@ def test_every_shader_variant_compiles():
     with Renderer() as r:
         assert r.ctx.error == "GL_NO_ERROR"
         r._program("classify")
-        for pc, norm, near in itertools.product((0, 1), (0, 1), (0, 1)):
-            r._program("tet", PERSPECTIVE_CORRECT=pc, TABLE_NORMALIZED=norm, NEAR_CROSSING=near)
+        for pc, norm, near, cubic in itertools.product((0, 1), (0, 1), (0, 1), (0, 1)):
+            r._program("tet", PERSPECTIVE_CORRECT=pc, TABLE_NORMALIZED=norm, NEAR_CROSSING=near, TABLE_CUBIC=cubic)
         for kind in ("floor", "depth"):
             r._program(kind, PERSPECTIVE_CORRECT=1)
         assert r.ctx.error == "GL_NO_ERROR"

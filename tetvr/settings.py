@@ -14,6 +14,8 @@ SORT_METHODS = ("centroid", "mpvo", "mpvonc", "none")
 #: How the pre-integration table is stored and looked up (see :mod:`tetvr.preintegrate`).
 TABLE_ENCODINGS = ("normalized", "premultiplied")
 TABLE_DTYPES = ("float32", "uint8")
+#: Interpolation of the table along its thickness axis.
+TABLE_FILTERS = ("linear", "cubic")
 #: Storage of the compositing target.
 FRAMEBUFFERS = ("float32", "uint8")
 
@@ -37,6 +39,8 @@ class RenderSettings:
         length, so that alpha is exact in the thickness and only the (slowly varying)
         colour is interpolated across slices; ``"premultiplied"`` stores premultiplied
         RGBA as in Kraus et al. 2004 and interpolates it linearly in log-thickness.
+    table_filter : ``"linear"`` or ``"cubic"`` (Catmull–Rom over four slices)
+        interpolation along the log-thickness axis.
     perspective_correct : interpolate front/back scalars and thickness
         perspective-correctly (Kraus et al. 2004) rather than linearly in screen space.
     framebuffer : ``"float32"`` compositing target, or ``"uint8"`` (what 8-bit
@@ -60,6 +64,7 @@ class RenderSettings:
     table_log_base: float = 2.0
     table_dtype: Literal["float32", "uint8"] = "float32"
     table_encoding: Literal["normalized", "premultiplied"] = "normalized"
+    table_filter: Literal["linear", "cubic"] = "linear"
     perspective_correct: bool = True
     framebuffer: Literal["float32", "uint8"] = "float32"
     optics: Literal["exact", "linear", "vtk"] = "exact"
@@ -69,6 +74,8 @@ class RenderSettings:
             raise ValueError(f"sort must be one of {SORT_METHODS}, got {self.sort!r}")
         if self.table_encoding not in TABLE_ENCODINGS:
             raise ValueError(f"table_encoding must be one of {TABLE_ENCODINGS}, got {self.table_encoding!r}")
+        if self.table_filter not in TABLE_FILTERS:
+            raise ValueError(f"table_filter must be one of {TABLE_FILTERS}, got {self.table_filter!r}")
         if self.framebuffer not in FRAMEBUFFERS:
             raise ValueError(f"framebuffer must be one of {FRAMEBUFFERS}, got {self.framebuffer!r}")
         if self.optics not in OPTICS:

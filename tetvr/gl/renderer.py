@@ -352,7 +352,8 @@ class Renderer:
         self._clock.lap("sort")
 
         defines = dict(PERSPECTIVE_CORRECT=int(self.settings.perspective_correct),
-                       TABLE_NORMALIZED=int(table.encoding == "normalized"))
+                       TABLE_NORMALIZED=int(table.encoding == "normalized"),
+                       TABLE_CUBIC=int(self.settings.table_filter == "cubic"))
         if shader == "tet":
             defines["NEAR_CROSSING"] = int(_crosses_near_plane(mesh, camera))
         prog = self._program(shader, **defines)

@@ -1,0 +1,719 @@
+"""Mixed-cell meshes: hexahedra, wedges, pyramids and quadratic cells split into tetrahedra.
+
+About this technique
+--------------------
+Dompierre, Labbé, Vallet & Camarero 1999, "How to subdivide pyramids, prisms and
+hexahedra into tetrahedra" (8th International Meshing Roundtable). A cell with
+quadrilateral faces splits into tetrahedra once each quad has a diagonal; two cells that
+share a quad conform (no crack, every triangle shared by exactly two tets) only if they
+pick the *same* diagonal. The rule that needs no communication between cells: **each quad
+takes the diagonal through its smallest global vertex id**. Both sides see the same four
+ids, so both choose alike.
+
+Two refinements here:
+
+* A quad that a neighbouring tetrahedron (or a wedge's or pyramid's triangular face)
+  already covers with one of its halves takes that triangle's diagonal instead, so a hex
+  sitting under a tet conforms to it too (``uGridEx.vtk`` has two). Where both halves are
+  claimed with different diagonals the input itself does not conform; the min-id rule
+  decides and :attr:`CellSplit.conflicts` counts it.
+* With the diagonals fixed, a cell is split by a table built once, at first use, by
+  exhaustive search: every set of corner tetrahedra that tiles the reference cell exactly
+  (an exact cover of a cloud of generic sample points, with the volumes summing to the
+  cell's) is a triangulation without new points — the cube has 74 — and each induces one
+  diagonal per quad. Each configuration of diagonals takes its triangulation with the
+  fewest tets (5 or 6 for a hex, 3 for a wedge, 2 for a pyramid). Configurations that no
+  triangulation induces (for the hex, 2 of the 64 the min-id rule can produce, and the
+  two "twisted" wedges, which it cannot) get a **Steiner point at the cell centroid**,
+  joined to every boundary triangle: 12 tets for a hex, 8 for a wedge. Its scalar (and
+  every point field) is the mean of the cell's corners — the value of trilinear
+  interpolation at a hex's centre.
+
+Quadratic and higher-order cells (``tetra10``, ``hexahedron20/27``, ``wedge15/18``,
+``pyramid13/14``, VTK Lagrange cells) keep their corner nodes, which VTK, Gmsh and meshio
+all list first; the mid-side nodes stay in the point list unused. Surface, line and
+vertex cells, polyhedra and n-gonal prisms are not volume cells that this module splits:
+they are counted and left out.
+
+Cells with repeated nodes (a hex collapsed into a wedge by repeating a node) give some
+tets with a repeated vertex; those have no volume and are dropped, with a count.
+
+Reading: :func:`read_cells` reads with meshio and falls back to a reader of legacy VTK
+unstructured grids here (ASCII or binary), for the files meshio refuses (meshio 5.3 has no
+triangle strips, VTK type 6, and raises ``KeyError: 6``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import itertools
+import os
+import re
+from typing import Any, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["CellSplit", "TetCells", "split_cells", "read_cells", "read_legacy_vtk", "VOLUME_CELLS",
+           "cell_triangulation"]
+
+Int = NDArray[np.int64]
+
+# ---------------------------------------------------------------------------------
+# Reference cells (VTK node order). Quads are listed cyclically; the diagonal bit of a
+# quad (a, b, c, d) is 0 for a-c and 1 for b-d.
+# ---------------------------------------------------------------------------------
+
+_REFERENCE: dict[str, tuple[NDArray[np.float64], tuple[tuple[int, ...], ...], tuple[tuple[int, ...], ...]]] = {
+    "tetra": (
+        np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float),
+        (),
+        ((0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)),
+    ),
+    "pyramid": (
+        np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]], float),
+        ((0, 1, 2, 3),),
+        ((0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)),
+    ),
+    "wedge": (
+        np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1]], float),
+        ((0, 1, 4, 3), (1, 2, 5, 4), (2, 0, 3, 5)),
+        ((0, 1, 2), (3, 4, 5)),
+    ),
+    "hexahedron": (
+        np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float),
+        ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)),
+        (),
+    ),
+}
+
+#: Cell types split into tets: meshio name -> (linear shape, corner-node selection).
+VOLUME_CELLS: dict[str, tuple[str, tuple[int, ...]]] = {
+    **{name: ("tetra", (0, 1, 2, 3)) for name in ("tetra", "tetra10", "tetra14", "VTK_LAGRANGE_TETRAHEDRON")},
+    **{name: ("pyramid", (0, 1, 2, 3, 4)) for name in ("pyramid", "pyramid13", "pyramid14",
+                                                         "VTK_LAGRANGE_PYRAMID")},
+    **{name: ("wedge", (0, 1, 2, 3, 4, 5)) for name in ("wedge", "wedge12", "wedge15", "wedge18",
+                                                          "VTK_LAGRANGE_WEDGE")},
+    **{name: ("hexahedron", tuple(range(8))) for name in ("hexahedron", "hexahedron20", "hexahedron24",
+                                                          "hexahedron27", "VTK_LAGRANGE_HEXAHEDRON")},
+    # VTK's voxel numbers its corners by bits (x, y, z); reorder to the hexahedron's cycle.
+    "voxel": ("hexahedron", (0, 1, 3, 2, 4, 5, 7, 6)),
+}
+
+# Sample points for the triangulation search; fixed seed, so the tables never change.
+_SEARCH_SEED = 19990901
+_SEARCH_SAMPLES = 4000
+
+
+@functools.cache
+def cell_triangulation(shape: str) -> tuple[tuple[NDArray[np.int64], ...], NDArray[np.bool_]]:
+    """The split of a reference cell for every configuration of its quad diagonals.
+
+    Returns ``(tables, centroid)``: ``tables[config]`` is a ``(k, 4)`` array of local
+    corner indices, where index ``n_corners`` stands for the cell's centroid, and
+    ``centroid[config]`` tells whether that configuration needed it. ``config`` has bit
+    ``f`` set when quad ``f`` takes its b-d diagonal.
+
+    Examples
+    --------
+    >>> tables, centroid = cell_triangulation("hexahedron")
+    >>> len(tables), int(centroid.sum()), sorted({len(t) for t in tables})
+    (64, 2, [5, 6, 12])
+    """
+    if shape not in _REFERENCE:
+        raise ValueError(f"shape must be one of {sorted(_REFERENCE)}, got {shape!r}")
+    corners, quads, tris = _REFERENCE[shape]
+    n = corners.shape[0]
+    found = _search_triangulations(corners, _volume6(corners, quads, tris))
+    best: dict[int, tuple[tuple[int, ...], ...]] = {}
+    for sol in found:
+        edges = {frozenset(e) for tet in sol for e in itertools.combinations(tet, 2)}
+        config = 0
+        for f, (a, b, c, d) in enumerate(quads):
+            ac, bd = frozenset((a, c)) in edges, frozenset((b, d)) in edges
+            if ac == bd:  # pragma: no cover - a triangulation cuts each quad exactly once
+                raise AssertionError(f"{shape}: triangulation {sol} cuts quad {quads[f]} ambiguously")
+            config |= int(bd) << f
+        key = (len(sol), sorted(sol))
+        if config not in best or key < (len(best[config]), sorted(best[config])):
+            best[config] = sol
+    tables: list[NDArray[np.int64]] = []
+    centroid = np.zeros(1 << len(quads), dtype=bool)
+    for config in range(1 << len(quads)):
+        if config in best:
+            tables.append(np.array(sorted(best[config]), dtype=np.int64).reshape(-1, 4))
+            continue
+        # No triangulation induces these diagonals: join the centroid to every boundary triangle.
+        centroid[config] = True
+        faces = [tuple(t) for t in tris]
+        for f, (a, b, c, d) in enumerate(quads):
+            faces += [(a, b, d), (b, c, d)] if config >> f & 1 else [(a, b, c), (a, c, d)]
+        tables.append(np.array([(*t, n) for t in faces], dtype=np.int64))
+    for t in tables:
+        t.setflags(write=False)
+    centroid.setflags(write=False)
+    return tuple(tables), centroid
+
+
+def _search_triangulations(corners: NDArray[np.float64], cell_volume6: float) -> list[tuple[tuple[int, ...], ...]]:
+    """Every set of corner tets that tiles the (convex) reference cell: exact covers of a
+    cloud of generic interior points whose volumes add up to the cell's."""
+    n = corners.shape[0]
+    cand = [c for c in itertools.combinations(range(n), 4)
+            if abs(np.linalg.det(corners[list(c[1:])] - corners[c[0]])) > 1e-9]
+    rng = np.random.default_rng(_SEARCH_SEED)
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    q = lo + rng.random((_SEARCH_SAMPLES, 3)) * (hi - lo)
+    bary = []
+    for c in cand:
+        p = corners[list(c)]
+        m = np.linalg.inv(np.vstack([p.T, np.ones(4)]))
+        bary.append(np.c_[q, np.ones(len(q))] @ m.T)
+    b = np.stack(bary)  # (n_cand, n_q, 4)
+    # Keep points well inside the cell and off every candidate's face planes: then each
+    # lies strictly inside or strictly outside every tet, and a tiling covers it once.
+    generic = np.all(np.abs(b) > 1e-6, axis=(0, 2)) & np.any(np.all(b > 0, axis=2), axis=0)
+    inside = np.all(b[:, generic] > 0, axis=2)  # (n_cand, n_q')
+    n_q = int(inside.shape[1])
+    masks = [int.from_bytes(np.packbits(row, bitorder="little").tobytes(), "little") for row in inside]
+    volume = [abs(np.linalg.det(corners[list(c[1:])] - corners[c[0]])) for c in cand]
+    by_point = [[i for i in range(len(cand)) if inside[i, j]] for j in range(n_q)]
+    full = (1 << n_q) - 1
+    out: list[tuple[tuple[int, ...], ...]] = []
+
+    def extend(covered: int, chosen: list[int]) -> None:
+        if covered == full:
+            if abs(sum(volume[i] for i in chosen) - cell_volume6) < 1e-9:
+                out.append(tuple(cand[i] for i in chosen))
+            return
+        free = ~covered & full
+        j = (free & -free).bit_length() - 1  # the first point not yet covered
+        for i in by_point[j]:
+            if masks[i] & covered == 0:
+                extend(covered | masks[i], chosen + [i])
+
+    extend(0, [])
+    return out
+
+
+def _volume6(corners: NDArray[np.float64], quads: tuple[tuple[int, ...], ...],
+             tris: tuple[tuple[int, ...], ...]) -> float:
+    """Six times the volume of a convex reference cell, by cones from its centroid."""
+    c = corners.mean(axis=0)
+    faces = [list(t) for t in tris] + [t for a, b, cc, d in quads for t in ([a, b, cc], [a, cc, d])]
+    return float(sum(abs(np.linalg.det(corners[f] - c)) for f in faces))
+
+
+# ---------------------------------------------------------------------------------
+# Splitting
+# ---------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class CellSplit:
+    """The volume cells of a mesh as tetrahedra.
+
+    Attributes
+    ----------
+    points : (n + k, 3) the input points, then ``k`` added cell centroids.
+    tets : (m, 4) int64 vertex ids (orientation not fixed; :class:`~tetvr.mesh.TetMesh` does that).
+    parent : (m,) int64 index of the input cell each tet comes from, counting every input
+        cell (of any type) in block order.
+    centroid_corners : (k, 8) int64 corner ids of the cell of each added point, ``-1`` padded.
+    split : ``(cell type, count)`` of the input cells that were not linear tets.
+    ignored : ``(cell type, count)`` of the cells left out (not volume cells).
+    dropped_repeated : tets dropped because a collapsed cell repeats a node in them.
+    conflicts : quads whose two halves neighbouring triangles claim with different diagonals.
+    """
+
+    points: NDArray[np.float64]
+    tets: Int
+    parent: Int
+    centroid_corners: Int
+    split: tuple[tuple[str, int], ...] = ()
+    ignored: tuple[tuple[str, int], ...] = ()
+    dropped_repeated: int = 0
+    conflicts: int = 0
+
+    @property
+    def n_input_points(self) -> int:
+        return int(self.points.shape[0] - self.centroid_corners.shape[0])
+
+    @property
+    def steiner_points(self) -> int:
+        """Centroids added to cells that cannot be split otherwise."""
+        return int(self.centroid_corners.shape[0])
+
+    def extend(self, point_values: ArrayLike) -> NDArray[Any]:
+        """A point field of the input points, with the added centroids appended (mean of
+        the cell's corners, per component).
+
+        Examples
+        --------
+        >>> s = split_cells(np.eye(4, 3), [("tetra", [[0, 1, 2, 3]])])
+        >>> s.extend([1.0, 2.0, 3.0, 4.0]).tolist()
+        [1.0, 2.0, 3.0, 4.0]
+        """
+        v = np.asarray(point_values)
+        if v.shape[:1] != (self.n_input_points,):
+            raise ValueError(f"point_values must have one row per input point ({self.n_input_points}), "
+                             f"got shape {v.shape}")
+        if self.steiner_points == 0:
+            return v.copy()
+        cc = self.centroid_corners
+        valid = cc >= 0
+        rows = v[np.where(valid, cc, 0)].astype(np.float64)
+        w = valid.reshape(valid.shape + (1,) * (v.ndim - 1))
+        mean = (rows * w).sum(axis=1) / w.sum(axis=1)
+        return np.concatenate([v.astype(np.result_type(v.dtype, np.float64)), mean])
+
+    def summary(self) -> str:
+        """One line for logs and warnings."""
+        parts = []
+        if self.split:
+            parts.append("split into tetrahedra: " + ", ".join(f"{v} {k}" for k, v in self.split))
+        if self.steiner_points:
+            parts.append(f"{self.steiner_points} cell centroids added")
+        if self.dropped_repeated:
+            parts.append(f"{self.dropped_repeated} tets of collapsed cells dropped")
+        if self.conflicts:
+            parts.append(f"{self.conflicts} quad faces claimed by non-conforming neighbours")
+        if self.ignored:
+            parts.append("ignored non-volume cells: " + ", ".join(f"{v} {k}" for k, v in self.ignored))
+        return "; ".join(parts)
+
+
+def split_cells(points: ArrayLike, blocks: Sequence[tuple[str, Any]]) -> CellSplit:
+    """Split every volume cell into tetrahedra that conform across shared faces.
+
+    Parameters
+    ----------
+    points : (n, 3) point coordinates.
+    blocks : ``(cell type, connectivity)`` pairs with meshio's type names (``"tetra"``,
+        ``"hexahedron"``, ``"wedge"``, ``"pyramid"``, ``"hexahedron20"``, ...); the
+        connectivity of a volume type is ``(k, nodes)`` in VTK node order. Other types
+        (``"triangle"``, ``"polygon"``, ...) need only a ``len()`` and are counted as ignored.
+
+    Returns
+    -------
+    CellSplit
+        The tets, the points (with any added centroids) and what was done.
+
+    Examples
+    --------
+    >>> cube = [[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)]
+    >>> s = split_cells(cube, [("hexahedron", [[0, 1, 3, 2, 4, 5, 7, 6]])])
+    >>> s.tets.shape, s.split, s.steiner_points
+    ((5, 4), (('hexahedron', 1),), 0)
+    """
+    pts = np.array(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points must have shape (n, 3), got {pts.shape}")
+    n_pts = pts.shape[0]
+
+    # Gather the volume cells by linear shape, remembering each one's input index.
+    by_shape: dict[str, list[tuple[Int, Int]]] = {s: [] for s in _REFERENCE}
+    split: dict[str, int] = {}
+    ignored: dict[str, int] = {}
+    offset = 0
+    for i, (ctype, data) in enumerate(blocks):
+        ctype = str(ctype)
+        count = len(data)
+        if ctype not in VOLUME_CELLS:
+            if count:
+                ignored[ctype] = ignored.get(ctype, 0) + count
+            offset += count
+            continue
+        shape, pick = VOLUME_CELLS[ctype]
+        conn = np.asarray(data)
+        if conn.size == 0:
+            offset += count
+            continue
+        if conn.ndim != 2 or conn.shape[1] < max(pick) + 1 or conn.dtype.kind not in "iu":
+            raise ValueError(f"block {i} ({ctype}) must be an integer array of shape (k, >= {max(pick) + 1}), "
+                             f"got {conn.dtype} {conn.shape}")
+        corners = conn[:, list(pick)].astype(np.int64)
+        if corners.min() < 0 or corners.max() >= n_pts:
+            bad = int(corners.min()) if corners.min() < 0 else int(corners.max())
+            raise ValueError(f"block {i} ({ctype}) indexes point {bad}, outside 0..{n_pts - 1}")
+        by_shape[shape].append((corners, np.arange(offset, offset + count, dtype=np.int64)))
+        if ctype != "tetra":
+            split[ctype] = split.get(ctype, 0) + count
+        offset += count
+
+    cells = {s: (np.concatenate([c for c, _ in v]), np.concatenate([p for _, p in v]))
+             for s, v in by_shape.items() if v}
+    bits, conflicts = _quad_diagonals(cells)
+
+    tets_out: list[Int] = []
+    parent_out: list[Int] = []
+    centroid_rows: list[Int] = []
+    n_new = 0
+    for shape, (corners, parent) in cells.items():
+        nq = len(_REFERENCE[shape][1])
+        tables, needs_centroid = cell_triangulation(shape)
+        config = (bits[shape] << np.arange(nq)).sum(axis=1) if nq else np.zeros(corners.shape[0], np.int64)
+        for cfg in np.unique(config):
+            sel = np.nonzero(config == cfg)[0]
+            local = tables[int(cfg)]
+            ext = corners[sel]
+            if needs_centroid[cfg]:
+                ids = n_pts + n_new + np.arange(sel.shape[0], dtype=np.int64)
+                n_new += sel.shape[0]
+                ext = np.concatenate([ext, ids[:, None]], axis=1)
+                centroid_rows.append(np.pad(corners[sel], ((0, 0), (0, 8 - corners.shape[1])), constant_values=-1))
+            tets_out.append(ext[:, local].reshape(-1, 4))
+            parent_out.append(np.repeat(parent[sel], local.shape[0]))
+
+    if tets_out:
+        tets = np.concatenate(tets_out)
+        parent_all = np.concatenate(parent_out)
+    else:
+        tets = np.zeros((0, 4), np.int64)
+        parent_all = np.zeros(0, np.int64)
+    # Keep the input order of the cells (a stable sort by parent).
+    order = np.argsort(parent_all, kind="stable")
+    tets, parent_all = tets[order], parent_all[order]
+    s = np.sort(tets, axis=1)
+    repeated = np.any(s[:, 1:] == s[:, :-1], axis=1)
+    if np.any(repeated):
+        tets, parent_all = tets[~repeated], parent_all[~repeated]
+    cc = np.concatenate(centroid_rows) if centroid_rows else np.zeros((0, 8), np.int64)
+    if n_new:
+        valid = cc >= 0
+        centre = (pts[np.where(valid, cc, 0)] * valid[..., None]).sum(axis=1) / valid.sum(axis=1)[:, None]
+        pts = np.concatenate([pts, centre])
+    return CellSplit(points=pts, tets=tets, parent=parent_all, centroid_corners=cc,
+                     split=tuple(split.items()), ignored=tuple(ignored.items()),
+                     dropped_repeated=int(repeated.sum()), conflicts=conflicts)
+
+
+def _quad_diagonals(cells: dict[str, tuple[Int, Int]]) -> tuple[dict[str, Int], int]:
+    """The diagonal bit of every quad of every cell, the same wherever a quad is shared."""
+    quads: dict[str, Int] = {}
+    tris: list[Int] = []
+    for shape, (corners, _) in cells.items():
+        _, q, t = _REFERENCE[shape]
+        if q:
+            quads[shape] = corners[:, np.array(q)]  # (k, nq, 4)
+        if t:
+            tris.append(corners[:, np.array(t)].reshape(-1, 3))
+    out: dict[str, Int] = {}
+    if not quads:
+        return out, 0
+    allq = np.concatenate([v.reshape(-1, 4) for v in quads.values()])
+    a, b, c, d = allq.T
+    # Smallest global id wins (Dompierre et al. 1999): bit 1 takes b-d.
+    bit = (np.minimum(b, d) < np.minimum(a, c)).astype(np.int64)
+    conflicts = 0
+    if tris:
+        # A quad half that is already another cell's triangle fixes the diagonal.
+        tri = np.sort(np.concatenate(tris), axis=1)
+        halves = np.sort(np.stack([allq[:, [1, 2, 3]], allq[:, [0, 2, 3]], allq[:, [0, 1, 3]], allq[:, [0, 1, 2]]],
+                                  axis=1).reshape(-1, 3), axis=1)
+        _, inv = np.unique(np.concatenate([tri, halves]), axis=0, return_inverse=True)
+        inv = inv.reshape(-1)
+        is_tri = np.zeros(int(inv.max()) + 1, dtype=bool)
+        is_tri[inv[: tri.shape[0]]] = True
+        claimed = is_tri[inv[tri.shape[0]:]].reshape(-1, 4)  # claimed[:, j]: the half without corner j
+        wants_bd = claimed[:, 0] | claimed[:, 2]  # a half without a (or c) holds b-d
+        wants_ac = claimed[:, 1] | claimed[:, 3]
+        bit = np.where(wants_bd & ~wants_ac, 1, np.where(wants_ac & ~wants_bd, 0, bit))
+        conflicts = int(np.sum(wants_bd & wants_ac))
+    start = 0
+    for shape, q in quads.items():
+        k, nq = q.shape[:2]
+        out[shape] = bit[start:start + k * nq].reshape(k, nq)
+        start += k * nq
+    return out, conflicts
+
+
+# ---------------------------------------------------------------------------------
+# Reading
+# ---------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class TetCells:
+    """A mesh file's volume cells as tetrahedra, with its fields carried over.
+
+    Attributes
+    ----------
+    split : the tets, points and what was done (:class:`CellSplit`).
+    point_data : every point field, with values for the added centroids appended.
+    cell_data : every cell field, one value (row) per tet, taken from its cell.
+    reader : ``"meshio"`` or ``"legacy-vtk"`` (the fallback here).
+    """
+
+    split: CellSplit
+    point_data: dict[str, NDArray[Any]]
+    cell_data: dict[str, NDArray[Any]]
+    reader: str = "meshio"
+
+    @property
+    def points(self) -> NDArray[np.float64]:
+        return self.split.points
+
+    @property
+    def tets(self) -> Int:
+        return self.split.tets
+
+
+def read_cells(path: str | os.PathLike[str]) -> TetCells:
+    """Read a mesh file and split its volume cells into conforming tetrahedra.
+
+    meshio reads the file; legacy VTK files meshio cannot read go to
+    :func:`read_legacy_vtk`. Raises ``ValueError`` for unreadable files and for files
+    without volume cells.
+
+    Examples
+    --------
+    >>> cells = read_cells("uGridEx.vtk")  # doctest: +SKIP
+    >>> cells.split.split, cells.split.ignored  # doctest: +SKIP
+    (('hexahedron', 2),), (('polygon', 1), ('triangle_strip', 1), ...)
+    """
+    import meshio  # deferred: importing meshio costs ~0.3 s
+
+    path = os.fspath(path)
+    reader = "meshio"
+    try:
+        m = meshio.read(path)
+        points = np.asarray(m.points, dtype=np.float64)
+        blocks: list[tuple[str, Any]] = [(c.type, c.data) for c in m.cells]
+        point_data = {k: np.asarray(v) for k, v in m.point_data.items()}
+        cell_blocks = {k: [np.asarray(b) for b in v] for k, v in m.cell_data.items()}
+    except Exception as exc:  # meshio raises many kinds for files it cannot parse
+        if not _is_legacy_vtk(path):
+            raise ValueError(f"cannot read mesh file {path!r}: {type(exc).__name__}: {exc}") from exc
+        try:
+            points, blocks, point_data, cell_blocks = read_legacy_vtk(path)
+        except Exception as exc2:
+            raise ValueError(f"cannot read mesh file {path!r}: meshio: {type(exc).__name__}: {exc}; "
+                             f"legacy VTK reader: {type(exc2).__name__}: {exc2}") from exc2
+        reader = "legacy-vtk"
+    if points.ndim == 2 and points.shape[1] == 2:
+        points = np.c_[points, np.zeros(points.shape[0])]
+    split = split_cells(points, blocks)
+    if split.tets.shape[0] == 0:
+        found = ", ".join(f"{k}: {v}" for k, v in split.ignored) or "no cells"
+        raise ValueError(f"{path!r} contains no tetrahedra or other volume cells ({found})")
+    pdata = {k: split.extend(v) for k, v in point_data.items() if v.shape[:1] == (points.shape[0],)}
+    cdata: dict[str, NDArray[Any]] = {}
+    for name, per_block in cell_blocks.items():
+        try:
+            flat = np.concatenate([np.asarray(b).reshape(len(b), -1) for b in per_block])
+        except ValueError:  # blocks with different component counts: not one field
+            continue
+        if flat.shape[0] != sum(len(d) for _, d in blocks):
+            continue
+        col = flat[split.parent]
+        cdata[name] = col[:, 0] if col.shape[1] == 1 else col
+    return TetCells(split=split, point_data=pdata, cell_data=cdata, reader=reader)
+
+
+def _is_legacy_vtk(path: str) -> bool:
+    try:
+        with open(path, "rb") as f:
+            return f.read(14) == b"# vtk DataFile"
+    except OSError:
+        return False
+
+
+#: VTK cell type ids -> meshio names (VTK's vtkCellType.h).
+VTK_CELL_TYPES = {
+    1: "vertex", 2: "polyvertex", 3: "line", 4: "polyline", 5: "triangle", 6: "triangle_strip",
+    7: "polygon", 8: "pixel", 9: "quad", 10: "tetra", 11: "voxel", 12: "hexahedron", 13: "wedge",
+    14: "pyramid", 15: "penta_prism", 16: "hexa_prism", 21: "line3", 22: "triangle6", 23: "quad8",
+    24: "tetra10", 25: "hexahedron20", 26: "wedge15", 27: "pyramid13", 28: "quad9", 29: "hexahedron27",
+    30: "quad6", 31: "wedge12", 32: "wedge18", 33: "hexahedron24", 34: "triangle7", 35: "line4",
+    37: "pyramid14", 42: "polyhedron", 71: "VTK_LAGRANGE_TETRAHEDRON", 72: "VTK_LAGRANGE_HEXAHEDRON",
+    73: "VTK_LAGRANGE_WEDGE", 74: "VTK_LAGRANGE_PYRAMID",
+}
+
+_VTK_DTYPES = {
+    "bit": "u1", "unsigned_char": "u1", "char": "i1", "signed_char": "i1", "unsigned_short": "u2", "short": "i2",
+    "unsigned_int": "u4", "int": "i4", "unsigned_long": "u8", "long": "i8", "float": "f4", "double": "f8",
+    "vtktypeint64": "i8", "vtktypeuint64": "u8", "vtkidtype": "i8", "vtktypeint32": "i4",
+}
+
+_TOKEN = re.compile(rb"\s*(\S+)")
+
+
+class _Cursor:
+    """Tokens, lines and binary blocks of a legacy VTK file."""
+
+    def __init__(self, raw: bytes, binary: bool, name: str) -> None:
+        self.raw, self.pos, self.binary, self.name = raw, 0, binary, name
+
+    def line(self) -> str:
+        end = self.raw.find(b"\n", self.pos)
+        end = len(self.raw) if end < 0 else end
+        out = self.raw[self.pos:end].decode("latin-1").strip()
+        self.pos = end + 1
+        return out
+
+    def token(self) -> str | None:
+        m = _TOKEN.match(self.raw, self.pos)
+        if not m:
+            self.pos = len(self.raw)
+            return None
+        self.pos = m.end()
+        return m.group(1).decode("latin-1")
+
+    def peek(self) -> str | None:
+        pos = self.pos
+        t = self.token()
+        self.pos = pos
+        return t
+
+    def values(self, n: int, dtype: str) -> NDArray[Any]:
+        dt = np.dtype(dtype)
+        if self.binary:
+            nl = self.raw.find(b"\n", self.pos)  # binary data start after the keyword's line
+            self.pos = nl + 1 if nl >= 0 else self.pos
+            nbytes = n * dt.itemsize
+            if self.pos + nbytes > len(self.raw):
+                raise ValueError(f"{self.name!r} ends inside binary data ({nbytes} bytes expected)")
+            out = np.frombuffer(self.raw, dt.newbyteorder(">"), count=n, offset=self.pos).astype(dt)
+            self.pos += nbytes
+            return out
+        if n == 0:
+            return np.zeros(0, dt)
+        parts = self.raw[self.pos:].split(maxsplit=n)
+        if len(parts) < n:
+            raise ValueError(f"{self.name!r} ends after {len(parts)} of {n} values")
+        self.pos = len(self.raw) - (len(parts[n]) if len(parts) > n else 0)
+        return np.array(parts[:n], dtype=np.float64 if dt.kind == "f" else np.int64).astype(dt)
+
+
+def read_legacy_vtk(path: str | os.PathLike[str]) -> tuple[
+        NDArray[np.float64], list[tuple[str, Any]], dict[str, NDArray[Any]], dict[str, list[NDArray[Any]]]]:
+    """Read a legacy VTK ``UNSTRUCTURED_GRID`` (ASCII or BINARY, the classic and the 5.1
+    OFFSETS/CONNECTIVITY cell layouts).
+
+    Returns ``(points, blocks, point_data, cell_data)`` in meshio's layout: blocks are runs
+    of consecutive cells of one type, ``(type name, (k, nodes) array)``, or a list of
+    arrays for cells of varying size (polygons, strips); cell fields are lists with one
+    array per block. SCALARS, VECTORS, NORMALS, TENSORS and FIELD arrays are read.
+    """
+    name = os.fspath(path)
+    raw = open(name, "rb").read()
+    if not raw.startswith(b"# vtk DataFile"):
+        raise ValueError(f"{name!r} is not a legacy VTK file")
+    head = _Cursor(raw, False, name)
+    head.line()  # version
+    head.line()  # title
+    mode = head.line().upper()
+    if mode not in ("ASCII", "BINARY"):
+        raise ValueError(f"{name!r}: third line must be ASCII or BINARY, got {mode!r}")
+    cur = _Cursor(raw, mode == "BINARY", name)
+    cur.pos = head.pos
+    points: NDArray[np.float64] | None = None
+    offsets: Int | None = None
+    conn: Int | None = None
+    types: Int | None = None
+    point_data: dict[str, NDArray[Any]] = {}
+    cell_flat: dict[str, NDArray[Any]] = {}
+    section, count = "", 0
+    while (t := cur.token()) is not None:
+        key = t.upper()
+        if key == "DATASET":
+            kind = (cur.token() or "").upper()
+            if kind != "UNSTRUCTURED_GRID":
+                raise ValueError(f"{name!r} holds a {kind} dataset, not an UNSTRUCTURED_GRID")
+        elif key == "POINTS":
+            n = int(cur.token() or 0)
+            dt = _VTK_DTYPES[(cur.token() or "").lower()]
+            points = cur.values(3 * n, dt).astype(np.float64).reshape(n, 3)
+        elif key == "CELLS":
+            a, b = int(cur.token() or 0), int(cur.token() or 0)
+            if (cur.peek() or "").upper() == "OFFSETS":  # VTK 5.1: offsets and connectivity arrays
+                cur.token()
+                offsets = cur.values(a, _VTK_DTYPES[(cur.token() or "").lower()]).astype(np.int64)
+                if (cur.token() or "").upper() != "CONNECTIVITY":
+                    raise ValueError(f"{name!r}: OFFSETS must be followed by CONNECTIVITY")
+                conn = cur.values(b, _VTK_DTYPES[(cur.token() or "").lower()]).astype(np.int64)
+            else:  # classic: per cell, its node count then its nodes
+                flat = cur.values(b, "i4").astype(np.int64)
+                k = int(flat[0]) if b else 0
+                if a and b == a * (k + 1) and np.all(flat[:: k + 1] == k):  # one cell size: no walk
+                    heads = np.arange(0, b, k + 1)
+                else:  # each count says where the next cell starts
+                    heads = np.zeros(a, np.int64)
+                    pos = 0
+                    for i in range(a):
+                        heads[i] = pos
+                        pos += int(flat[pos]) + 1
+                offsets = np.r_[0, np.cumsum(flat[heads])]
+                keep = np.ones(flat.shape[0], dtype=bool)
+                keep[heads] = False
+                conn = flat[keep]
+        elif key == "CELL_TYPES":
+            n = int(cur.token() or 0)
+            types = cur.values(n, "i4").astype(np.int64)
+        elif key in ("POINT_DATA", "CELL_DATA"):
+            section, count = key, int(cur.token() or 0)
+        elif key in ("SCALARS", "VECTORS", "NORMALS", "TENSORS", "TEXTURE_COORDINATES", "COLOR_SCALARS"):
+            aname = cur.token() or ""
+            if key == "COLOR_SCALARS":
+                ncomp, dt = int(cur.token() or 1), ("u1" if cur.binary else "f4")
+            else:
+                dt = _VTK_DTYPES[(cur.token() or "").lower()]
+                ncomp = {"VECTORS": 3, "NORMALS": 3, "TENSORS": 9}.get(key, 1)
+                if key == "SCALARS":
+                    rest = cur.line().split()
+                    ncomp = int(rest[0]) if rest else 1
+                    if (cur.peek() or "").upper() == "LOOKUP_TABLE":
+                        cur.token()
+                        cur.token()
+                elif key == "TEXTURE_COORDINATES":
+                    ncomp = int(cur.token() or 1)
+            vals = cur.values(count * ncomp, dt)
+            _store(point_data if section == "POINT_DATA" else cell_flat, aname, vals, count, ncomp)
+        elif key == "LOOKUP_TABLE":
+            cur.token()
+            n = int(cur.token() or 0)
+            cur.values(4 * n, "u1" if cur.binary else "f4")
+        elif key == "FIELD":
+            cur.token()
+            for _ in range(int(cur.token() or 0)):
+                aname = cur.token() or ""
+                ncomp, ntup = int(cur.token() or 1), int(cur.token() or 0)
+                vals = cur.values(ncomp * ntup, _VTK_DTYPES[(cur.token() or "").lower()])
+                if (cur.peek() or "").upper() == "METADATA":
+                    _skip_metadata(cur)
+                target = point_data if section == "POINT_DATA" else cell_flat if section == "CELL_DATA" else None
+                if target is not None:
+                    _store(target, aname, vals, ntup, ncomp)
+        elif key == "METADATA":
+            cur.pos -= len(t)
+            _skip_metadata(cur)
+        else:
+            raise ValueError(f"{name!r}: unexpected keyword {t!r} at byte {cur.pos}")
+    if points is None or offsets is None or conn is None or types is None:
+        raise ValueError(f"{name!r} lacks POINTS, CELLS or CELL_TYPES")
+    if types.shape[0] != offsets.shape[0] - 1:
+        raise ValueError(f"{name!r}: {types.shape[0]} CELL_TYPES for {offsets.shape[0] - 1} CELLS")
+    blocks: list[tuple[str, Any]] = []
+    run_starts = np.r_[0, np.nonzero(np.diff(types))[0] + 1, types.shape[0]]
+    for s, e in zip(run_starts[:-1], run_starts[1:]):
+        ctype = VTK_CELL_TYPES.get(int(types[s]), f"vtk_type_{int(types[s])}")
+        sizes = np.diff(offsets[s:e + 1])
+        if np.all(sizes == sizes[0]):
+            blocks.append((ctype, conn[offsets[s]:offsets[e]].reshape(e - s, int(sizes[0]))))
+        else:
+            blocks.append((ctype, [conn[offsets[i]:offsets[i + 1]] for i in range(s, e)]))
+    cell_data = {k: [v[s:e] for s, e in zip(run_starts[:-1], run_starts[1:])] for k, v in cell_flat.items()}
+    return points, blocks, point_data, cell_data
+
+
+def _store(target: dict[str, NDArray[Any]], name: str, vals: NDArray[Any], n: int, ncomp: int) -> None:
+    target[name] = vals if ncomp == 1 else vals.reshape(n, ncomp)
+
+
+def _skip_metadata(cur: _Cursor) -> None:
+    """METADATA blocks (information keys) end at the first blank line."""
+    cur.line()
+    while cur.pos < len(cur.raw) and cur.line() != "":
+        pass
