@@ -24,10 +24,33 @@ Vec3 = tuple[float, float, float]
 
 
 def _vec3(value: Any, name: str) -> Vec3:
-    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be 3 finite numbers, got {value!r}") from None
     if arr.shape != (3,) or not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
     return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+def _real(value: Any, name: str) -> float:
+    """A finite float; booleans and strings are not numbers here."""
+    if isinstance(value, (bool, np.bool_, str, bytes)):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(out):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return out
+
+
+def _flag(value: Any, name: str) -> bool:
+    # bool("false") is True: only real booleans (and 0 / 1) are accepted.
+    if isinstance(value, (bool, np.bool_)) or (isinstance(value, (int, np.integer)) and value in (0, 1)):
+        return bool(value)
+    raise ValueError(f"{name} must be true or false, got {value!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,27 +79,34 @@ class Camera:
         object.__setattr__(self, "position", pos)
         object.__setattr__(self, "focal_point", foc)
         object.__setattr__(self, "view_up", up)
-        d = np.subtract(foc, pos)
-        dist = float(np.linalg.norm(d))
+        with np.errstate(over="ignore", invalid="ignore"):
+            d = np.subtract(foc, pos)
+            dist = float(np.linalg.norm(d))
         if not dist > 0:
             raise ValueError(f"camera position equals focal_point {foc}: no view direction")
+        if not math.isfinite(dist):
+            raise ValueError(f"camera position {pos} and focal_point {foc} are too far apart (distance overflows)")
         u = np.asarray(up)
         if not np.linalg.norm(u) > 0:
             raise ValueError("view_up must not be the zero vector")
         sin = np.linalg.norm(np.cross(d / dist, u / np.linalg.norm(u)))
         if sin < 1e-6:
-            raise ValueError(f"view_up {up} is parallel to the view direction {tuple((d / dist).round(6))}")
-        angle = float(self.view_angle)
+            raise ValueError(f"view_up {up} is parallel to the view direction "
+                             f"{tuple(float(v) for v in (d / dist).round(6))}")
+        angle = _real(self.view_angle, "view_angle")
         if not (0.0 < angle < 180.0):
             raise ValueError(f"view_angle must be in (0, 180) degrees, got {self.view_angle!r}")
         object.__setattr__(self, "view_angle", angle)
-        object.__setattr__(self, "parallel_projection", bool(self.parallel_projection))
-        scale = float(self.parallel_scale)
-        if not (np.isfinite(scale) and scale > 0):
+        object.__setattr__(self, "parallel_projection", _flag(self.parallel_projection, "parallel_projection"))
+        scale = _real(self.parallel_scale, "parallel_scale")
+        if not scale > 0:
             raise ValueError(f"parallel_scale must be positive, got {self.parallel_scale!r}")
         object.__setattr__(self, "parallel_scale", scale)
-        near, far = (float(v) for v in self.clipping_range)
-        if not (np.isfinite(near) and np.isfinite(far)) or not near < far:
+        try:
+            near, far = (_real(v, "clipping_range") for v in self.clipping_range)
+        except (TypeError, ValueError):
+            raise ValueError(f"clipping_range must be two finite numbers (near, far), got {self.clipping_range!r}") from None
+        if not near < far:
             raise ValueError(f"clipping_range must be (near, far) with near < far, got {self.clipping_range!r}")
         if not self.parallel_projection and near <= 0:
             raise ValueError(f"a perspective camera needs near > 0, got clipping_range {self.clipping_range!r}")
@@ -101,11 +131,19 @@ class Camera:
         lo, hi = mesh.bounds
         centre = 0.5 * (lo + hi)
         radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-30)
-        d = np.asarray(direction, dtype=np.float64)
+        d = np.asarray(_vec3(direction, "direction"))
         if not np.linalg.norm(d) > 0:
             raise ValueError("direction must not be the zero vector")
         d = d / np.linalg.norm(d)
-        up = np.asarray(view_up, dtype=np.float64)
+        up = np.asarray(_vec3(view_up, "view_up"))
+        if not np.linalg.norm(up) > 0:
+            raise ValueError("view_up must not be the zero vector")
+        view_angle = _real(view_angle, "view_angle")
+        if not 0.0 < view_angle < 180.0:
+            raise ValueError(f"view_angle must be in (0, 180) degrees, got {view_angle!r}")
+        zoom = _real(zoom, "zoom")
+        if not zoom > 0:
+            raise ValueError(f"zoom must be positive, got {zoom!r}")
         if np.linalg.norm(np.cross(d, up)) < 1e-6 * np.linalg.norm(up):
             up = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
         half = math.radians(view_angle) / 2

@@ -22,12 +22,14 @@ Two refinements here:
   (an exact cover of a cloud of generic sample points, with the volumes summing to the
   cell's) is a triangulation without new points — the cube has 74 — and each induces one
   diagonal per quad. Each configuration of diagonals takes its triangulation with the
-  fewest tets (5 or 6 for a hex, 3 for a wedge, 2 for a pyramid). Configurations that no
-  triangulation induces (for the hex, 2 of the 64 the min-id rule can produce, and the
-  two "twisted" wedges, which it cannot) get a **Steiner point at the cell centroid**,
-  joined to every boundary triangle: 12 tets for a hex, 8 for a wedge. Its scalar (and
-  every point field) is the mean of the cell's corners — the value of trilinear
-  interpolation at a hex's centre.
+  fewest tets (5 or 6 for a hex, 3 for a wedge, 2 for a pyramid). 18 of the 64 hex
+  configurations and the two "twisted" wedges are induced by no triangulation. The min-id
+  rule never produces them (the smallest corner's faces all take diagonals through it;
+  the tests try all 8! orders of a hex's ids), but diagonals claimed by neighbouring
+  triangles can. Such a cell gets a **Steiner point at its centroid**, joined to every
+  boundary triangle: 12 tets for a hex, 8 for a wedge. Its scalar (and every point field)
+  is the mean of the cell's corners — the value of trilinear interpolation at a hex's
+  centre.
 
 Quadratic and higher-order cells (``tetra10``, ``hexahedron20/27``, ``wedge15/18``,
 ``pyramid13/14``, VTK Lagrange cells) keep their corner nodes, which VTK, Gmsh and meshio
@@ -50,7 +52,7 @@ import functools
 import itertools
 import os
 import re
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -119,13 +121,14 @@ def cell_triangulation(shape: str) -> tuple[tuple[NDArray[np.int64], ...], NDArr
     --------
     >>> tables, centroid = cell_triangulation("hexahedron")
     >>> len(tables), int(centroid.sum()), sorted({len(t) for t in tables})
-    (64, 2, [5, 6, 12])
+    (64, 18, [5, 6, 12])
     """
     if shape not in _REFERENCE:
         raise ValueError(f"shape must be one of {sorted(_REFERENCE)}, got {shape!r}")
     corners, quads, tris = _REFERENCE[shape]
     n = corners.shape[0]
-    found = _search_triangulations(corners, _volume6(corners, quads, tris))
+    found = [sol for sol in _search_triangulations(corners, _volume6(corners, quads, tris))
+             if _face_to_face(sol, quads, tris)]
     best: dict[int, tuple[tuple[int, ...], ...]] = {}
     for sol in found:
         edges = {frozenset(e) for tet in sol for e in itertools.combinations(tet, 2)}
@@ -195,6 +198,18 @@ def _search_triangulations(corners: NDArray[np.float64], cell_volume6: float) ->
 
     extend(0, [])
     return out
+
+
+def _face_to_face(sol: tuple[tuple[int, ...], ...], quads: tuple[tuple[int, ...], ...],
+                  tris: tuple[tuple[int, ...], ...]) -> bool:
+    """Whether a dissection is a triangulation: each tet face is either on the cell's
+    boundary or shared whole by exactly one other tet (so no face is cut by another's edge)."""
+    boundary = [set(f) for f in quads] + [set(f) for f in tris]
+    count: dict[tuple[int, ...], int] = {}
+    for tet in sol:
+        for face in itertools.combinations(sorted(tet), 3):
+            count[face] = count.get(face, 0) + 1
+    return all(n == 2 or (n == 1 and any(set(f) <= b for b in boundary)) for f, n in count.items())
 
 
 def _volume6(corners: NDArray[np.float64], quads: tuple[tuple[int, ...], ...],
@@ -267,6 +282,18 @@ class CellSplit:
         w = valid.reshape(valid.shape + (1,) * (v.ndim - 1))
         mean = (rows * w).sum(axis=1) / w.sum(axis=1)
         return np.concatenate([v.astype(np.result_type(v.dtype, np.float64)), mean])
+
+    def compacted(self, keep: NDArray[np.bool_]) -> "CellSplit":
+        """The same split over the points where ``keep`` is true (every tet vertex must be
+        kept); :meth:`extend` then expects values for the input points that are kept."""
+        if not np.all(keep[self.tets]):
+            raise ValueError("compacted() must keep every point a tet uses")
+        new_id = np.cumsum(keep) - 1
+        old = self.centroid_corners
+        if np.any((old >= 0) & ~keep[np.maximum(old, 0)]):
+            raise ValueError("compacted() must keep the corners of every cell given a centroid")
+        cc = np.where(old >= 0, new_id[np.maximum(old, 0)], -1)
+        return dataclasses.replace(self, points=self.points[keep], tets=new_id[self.tets], centroid_corners=cc)
 
     def summary(self) -> str:
         """One line for logs and warnings."""
@@ -460,36 +487,47 @@ class TetCells:
         return self.split.tets
 
 
-def read_cells(path: str | os.PathLike[str]) -> TetCells:
+def read_cells(path: str | os.PathLike[str], *, meshio_read: Callable[[str], Any] | None = None) -> TetCells:
     """Read a mesh file and split its volume cells into conforming tetrahedra.
 
-    meshio reads the file; legacy VTK files meshio cannot read go to
-    :func:`read_legacy_vtk`. Raises ``ValueError`` for unreadable files and for files
-    without volume cells.
+    Parameters
+    ----------
+    path : the mesh file.
+    meshio_read : the function that reads with meshio (:func:`tetvr.mesh.read` passes its
+        guarded one); default ``meshio.read``. Legacy VTK files it cannot read go to
+        :func:`read_legacy_vtk`.
+
+    Points that no tet uses (mid-side nodes, points of surface and line cells) are left
+    out, so the mesh's bounds and scalar range are those of what is rendered. Raises
+    ``ValueError`` for unreadable files and for files without volume cells.
 
     Examples
     --------
     >>> cells = read_cells("uGridEx.vtk")  # doctest: +SKIP
-    >>> cells.split.split, cells.split.ignored  # doctest: +SKIP
-    (('hexahedron', 2),), (('polygon', 1), ('triangle_strip', 1), ...)
+    >>> cells.split.split, cells.reader  # doctest: +SKIP
+    ((('hexahedron', 2),), 'legacy-vtk')
     """
-    import meshio  # deferred: importing meshio costs ~0.3 s
-
     path = os.fspath(path)
+    if meshio_read is None:
+        import meshio  # deferred: importing meshio costs ~0.3 s
+
+        meshio_read = meshio.read
     reader = "meshio"
     try:
-        m = meshio.read(path)
+        m = meshio_read(path)
         points = np.asarray(m.points, dtype=np.float64)
         blocks: list[tuple[str, Any]] = [(c.type, c.data) for c in m.cells]
         point_data = {k: np.asarray(v) for k, v in m.point_data.items()}
         cell_blocks = {k: [np.asarray(b) for b in v] for k, v in m.cell_data.items()}
-    except Exception as exc:  # meshio raises many kinds for files it cannot parse
+    except (Exception, SystemExit) as exc:  # meshio raises many kinds, and exits when a reader rejects a file
         if not _is_legacy_vtk(path):
+            if isinstance(exc, ValueError):
+                raise
             raise ValueError(f"cannot read mesh file {path!r}: {type(exc).__name__}: {exc}") from exc
         try:
             points, blocks, point_data, cell_blocks = read_legacy_vtk(path)
         except Exception as exc2:
-            raise ValueError(f"cannot read mesh file {path!r}: meshio: {type(exc).__name__}: {exc}; "
+            raise ValueError(f"cannot read mesh file {path!r}: meshio: {exc}; "
                              f"legacy VTK reader: {type(exc2).__name__}: {exc2}") from exc2
         reader = "legacy-vtk"
     if points.ndim == 2 and points.shape[1] == 2:
@@ -498,14 +536,19 @@ def read_cells(path: str | os.PathLike[str]) -> TetCells:
     if split.tets.shape[0] == 0:
         found = ", ".join(f"{k}: {v}" for k, v in split.ignored) or "no cells"
         raise ValueError(f"{path!r} contains no tetrahedra or other volume cells ({found})")
-    pdata = {k: split.extend(v) for k, v in point_data.items() if v.shape[:1] == (points.shape[0],)}
+    used = np.zeros(split.points.shape[0], dtype=bool)
+    used[split.tets.ravel()] = True
+    pdata = {k: split.extend(v)[used] for k, v in point_data.items() if v.shape[:1] == (points.shape[0],)}
+    if not np.all(used):
+        split = split.compacted(used)
     cdata: dict[str, NDArray[Any]] = {}
+    n_cells = sum(len(d) for _, d in blocks)
     for name, per_block in cell_blocks.items():
         try:
             flat = np.concatenate([np.asarray(b).reshape(len(b), -1) for b in per_block])
         except ValueError:  # blocks with different component counts: not one field
             continue
-        if flat.shape[0] != sum(len(d) for _, d in blocks):
+        if flat.shape[0] != n_cells:
             continue
         col = flat[split.parent]
         cdata[name] = col[:, 0] if col.shape[1] == 1 else col
@@ -598,7 +641,8 @@ def read_legacy_vtk(path: str | os.PathLike[str]) -> tuple[
     array per block. SCALARS, VECTORS, NORMALS, TENSORS and FIELD arrays are read.
     """
     name = os.fspath(path)
-    raw = open(name, "rb").read()
+    with open(name, "rb") as f:
+        raw = f.read()
     if not raw.startswith(b"# vtk DataFile"):
         raise ValueError(f"{name!r} is not a legacy VTK file")
     head = _Cursor(raw, False, name)

@@ -1,4 +1,5 @@
-"""Command line: ``tetvr render scene.json -o out.png``, ``tetvr demo``, ``tetvr info mesh``."""
+"""Command line: ``tetvr render scene.json -o out.png``, ``tetvr demo``, ``tetvr info mesh``,
+``tetvr animate scene.json --orbit 36 -o frames/``, ``tetvr view scene.json``."""
 
 from __future__ import annotations
 
@@ -76,13 +77,40 @@ def main(argv: list[str] | None = None) -> int:
     p_fusion = sub.add_parser("fusion-demo", help="render the bundled vessel-flow fusion demo in every mode")
     p_fusion.add_argument("-o", "--output", default="fusion", help="folder for the PNGs (default: ./fusion)")
     p_fusion.add_argument("--size", type=int, nargs=2, default=(480, 360), metavar=("W", "H"))
+    p_cmp = sub.add_parser("compare", help="render a scene with tetvr and VTK's unstructured mappers; "
+                           "time them and measure their error (needs tetvr[compare])")
+    p_cmp.add_argument("scene", help="scene JSON")
+    p_cmp.add_argument("-o", "--output", default="compare", help="folder for the pictures and tables")
+    p_cmp.add_argument("--mappers", default="pt,bunyk,zsweep", help="VTK mappers, comma-separated ('' for none)")
+    p_cmp.add_argument("--views", type=int, default=5, help="view changes to time (default 5)")
+    p_cmp.add_argument("--size", type=int, nargs=2, metavar=("W", "H"), help="image size (default: the scene's)")
     p_info = sub.add_parser("info", help="describe a mesh file and the OpenGL context")
     p_info.add_argument("mesh")
+    p_view = sub.add_parser("view", help="open a scene in a desktop window (needs moderngl-window and a display)")
+    p_view.add_argument("scene", help="scene JSON")
+    p_anim = sub.add_parser("animate", help="render a camera orbit or time steps to PNG frames or a video")
+    p_anim.add_argument("scene", help="scene JSON (camera, transfer function, size)")
+    p_anim.add_argument("--orbit", type=int, metavar="N", help="N frames of an orbit about the view up")
+    p_anim.add_argument("--degrees", type=float, default=360.0, help="orbit sweep in degrees (default 360)")
+    p_anim.add_argument("--time-series", nargs="+", metavar="FILE",
+                        help="one mesh file per time step, or one XDMF time series")
+    p_anim.add_argument("--fps", type=float, default=12.0, help="frames per second of a video (default 12)")
+    p_anim.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p_anim.add_argument("-o", "--output", default="frames",
+                        help="a folder for PNG frames, or a .mp4/.webm/.gif file (default: frames/)")
     args = parser.parse_args(argv)
 
     try:
         if args.command == "render":
             return _render_scene(args.scene, args.output, args.npy, "reference" if args.reference else "gpu")
+        if args.command == "compare":
+            from .vtkcompare import compare
+
+            mappers = [m for m in args.mappers.split(",") if m]
+            compare(args.scene, mappers=mappers, views=args.views, size=tuple(args.size) if args.size else None,
+                    outdir=args.output, log=print)
+            print(f"-> {Path(args.output) / 'comparison.md'}")
+            return 0
         if args.command == "demo":
             from .scene import demo_scene_path
 
@@ -97,8 +125,26 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{args.mesh}: {mesh.n_points} points, {mesh.n_tets} tets; field {mesh.scalar_name!r} "
                   f"range {mesh.scalar_range}; bounds {lo.tolist()} .. {hi.tolist()}; report {mesh.report}")
             return 0
-    except (ValueError, KeyError, FileNotFoundError, TypeError) as exc:
+        if args.command == "view":
+            from .widget import run_desktop
+
+            run_desktop(args.scene)
+            return 0
+        if args.command == "animate":
+            from .animate import animate
+
+            series = args.time_series
+            if series is not None and len(series) == 1:
+                series = series[0]  # one file: an XDMF time series (or a single step)
+            files = animate(args.scene, args.output, orbit_frames=args.orbit, degrees=args.degrees,
+                            time_series=series, fps=args.fps, progress=not args.no_progress)
+            print(f"wrote {len(files)} file(s): {files[0]}{' ...' if len(files) > 1 else ''}")
+            return 0
+    except ImportError as exc:  # an optional dependency (imageio, moderngl-window)
         print(f"tetvr: error: {exc}", file=sys.stderr)
+        return 2
+    except (ValueError, KeyError, OSError, TypeError) as exc:  # OSError: unreadable input, unwritable output
+        print(f"tetvr: error: {exc.args[0] if isinstance(exc, KeyError) and exc.args else exc}", file=sys.stderr)
         return 2
     except RuntimeError as exc:  # GLUnavailableError, shader errors
         print(f"tetvr: error: {exc}", file=sys.stderr)

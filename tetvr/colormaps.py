@@ -306,6 +306,7 @@ def _resample_color(rgb: NDArray[np.float64], space: str, per: int, span: tuple[
             continue
         t = np.linspace(0.0, 1.0, per + 1)[1:]
         cols = _interp_space(a[1:], b[1:], t, space)
+        cols[-1] = b[1:]  # the node itself, exactly
         out.append(np.column_stack([a[0] + (b[0] - a[0]) * t, cols]))
     return np.concatenate(out)
 
@@ -367,7 +368,8 @@ def _interp_space(c1: NDArray[np.float64], c2: NDArray[np.float64], t: NDArray[n
 # Colour conversions as VTK does them (sRGB, D65 white; vtkMath::RGBToLab).
 _WHITE = np.array([0.9505, 1.0, 1.089])
 _RGB_TO_XYZ = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]])
-_XYZ_TO_RGB = np.array([[3.2406, -1.5372, -0.4986], [-0.9689, 1.8758, 0.0415], [0.0557, -0.2040, 1.0570]])
+# The exact inverse (not VTK's rounded one), so that nodes survive the round trip.
+_XYZ_TO_RGB = np.linalg.inv(_RGB_TO_XYZ)
 
 
 def _rgb_to_lab(rgb: Any) -> NDArray[np.float64]:

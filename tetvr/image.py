@@ -49,6 +49,8 @@ def write_png(image: ArrayLike, path: str | os.PathLike[str], *, background: Seq
     """
     rgba = to_rgba8(image, background)
     h, w, _ = rgba.shape
+    if h < 1 or w < 1:
+        raise ValueError(f"a PNG needs at least one pixel, got an image of shape {rgba.shape}")
     raw = b"".join(b"\x00" + rgba[i].tobytes() for i in range(h))
 
     def chunk(tag: bytes, data: bytes) -> bytes:
@@ -62,7 +64,10 @@ def write_png(image: ArrayLike, path: str | os.PathLike[str], *, background: Seq
 
 def rmse(a: ArrayLike, b: ArrayLike) -> float:
     """Root-mean-square difference of premultiplied RGB."""
-    d = np.asarray(a, dtype=np.float64)[..., :3] - np.asarray(b, dtype=np.float64)[..., :3]
+    x, y = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    if x.shape != y.shape or x.ndim < 1 or x.shape[-1] < 3 or x.size == 0:
+        raise ValueError(f"images must have the same shape (..., 3 or 4), got {x.shape} and {y.shape}")
+    d = x[..., :3] - y[..., :3]
     return float(np.sqrt(np.mean(d * d)))
 
 

@@ -35,6 +35,8 @@ class MeshReport:
     inverted_fixed: int = 0
     ignored_cells: tuple[tuple[str, int], ...] = ()
     scalar_source: str = "point"
+    split_cells: tuple[tuple[str, int], ...] = ()  # non-tet volume cells split into tets (tetvr.cells)
+    steiner_points: int = 0  # cell centroids added where a cell could not be split otherwise
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -234,9 +236,11 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
     Notes
     -----
     Cell data becomes point data by volume-weighted averaging: each point takes the mean
-    of the values of the tets around it, weighted by their volumes. Cells that are not
-    linear tetrahedra are reported by type and count and left out. Zero-volume tets are
-    dropped with a warning.
+    of the values of the tets around it, weighted by their volumes. Hexahedra, wedges,
+    pyramids and quadratic cells are split into tetrahedra that conform across shared
+    faces (:mod:`tetvr.cells`), with a warning listing them; surface, line and vertex
+    cells are reported by type and count and left out. Zero-volume tets are dropped with
+    a warning.
 
     Examples
     --------
@@ -253,21 +257,12 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
         raise TypeError(f"scalars must be a field name (str) or None, got {scalars!r}")
     if component is not None and (isinstance(component, bool) or not isinstance(component, (int, np.integer))):
         raise TypeError(f"component must be an integer or None, got {component!r}")
-    m = _meshio_read(path)
+    from .cells import read_cells  # volume cells split into tets; legacy VTK meshio refuses is read there
 
-    tet_blocks = [i for i, c in enumerate(m.cells) if c.type == "tetra"]
-    ignored: dict[str, int] = {}
-    for c in m.cells:
-        if c.type != "tetra":
-            ignored[c.type] = ignored.get(c.type, 0) + len(c.data)
-    if not tet_blocks:
-        found = ", ".join(f"{k}: {v}" for k, v in ignored.items()) or "no cells"
-        raise ValueError(f"{path!r} contains no tetrahedra ({found})")
-    tets = np.concatenate([m.cells[i].data for i in tet_blocks]).astype(np.int64)
-    if ignored:
-        warnings.warn(
-            "ignored non-tetrahedral cells: " + ", ".join(f"{v} {k}" for k, v in ignored.items()), stacklevel=2
-        )
+    m = read_cells(path, meshio_read=_meshio_read)
+    tets = m.tets
+    if m.split.split or m.split.ignored:
+        warnings.warn(f"{os.path.basename(path)}: {m.split.summary()}", stacklevel=2)
 
     point_names = list(m.point_data)
     cell_names = list(m.cell_data)
@@ -282,38 +277,42 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
         values = _field_to_scalar(m.point_data[scalars], scalars, component)
         source = "point"
     elif scalars in m.cell_data:
-        cell_values = np.concatenate(
-            [_field_to_scalar(m.cell_data[scalars][i], scalars, component) for i in tet_blocks]
-        ).astype(np.float64)
-        values = _cell_to_point(np.asarray(m.points, dtype=np.float64), tets, cell_values)
+        cell_values = _field_to_scalar(m.cell_data[scalars], scalars, component).astype(np.float64)
+        values = _cell_to_point(m.points, tets, cell_values)
         source = "cell"
     else:
         raise KeyError(
             f"no field named {scalars!r} in {path!r}; point fields: {point_names}, cell fields: {cell_names}"
         )
     mesh = TetMesh.from_arrays(m.points, tets, values, scalar_name=scalars)
-    report = dataclasses.replace(mesh.report, ignored_cells=tuple(ignored.items()), scalar_source=source)
+    report = dataclasses.replace(mesh.report, ignored_cells=m.split.ignored, scalar_source=source,
+                                 split_cells=m.split.split, steiner_points=m.split.steiner_points)
     return dataclasses.replace(mesh, report=report)
 
 
 # meshio readers that loop forever at an unexpected end of file, and the mode they open
 # the file in: they are handed a file object that raises there instead.
-_LOOPS_AT_EOF = {"tecplot": "r", "mdpa": "rb"}
+_LOOPS_AT_EOF = {"tecplot": "r", "mdpa": "rb", "ply": "rb", "ansys": "rb"}
 # Consecutive empty reads at the end of a file before it counts as such a loop.
 _EOF_READS = 1000
 
 
 class _EOFGuard:
-    """Mixin for file objects: readline() raises after returning "" too many times."""
+    """Mixin for file objects: reads raise after returning nothing too many times."""
 
     _eof_reads = 0
 
-    def readline(self, *args: Any) -> Any:
-        line = super().readline(*args)  # type: ignore[misc]
-        self._eof_reads = 0 if line else self._eof_reads + 1
+    def _count(self, data: Any) -> Any:
+        self._eof_reads = 0 if data else self._eof_reads + 1
         if self._eof_reads > _EOF_READS:
             raise EOFError("unexpected end of file (the file is truncated)")
-        return line
+        return data
+
+    def readline(self, *args: Any) -> Any:
+        return self._count(super().readline(*args))  # type: ignore[misc]
+
+    def read(self, *args: Any) -> Any:
+        return self._count(super().read(*args))  # type: ignore[misc]
 
 
 class _GuardedBytes(_EOFGuard, io.BufferedReader):
@@ -374,8 +373,11 @@ def _meshio_read(path: str) -> Any:
         except (Exception, SystemExit) as exc:  # SystemExit: meshio exits when a reader rejects a file
             said = [ln.strip() for ln in chatter.getvalue().splitlines()
                     if ln.strip() and "Couldn't read file" not in ln]
-            why = f"{type(exc).__name__}: {exc}" if not isinstance(exc, SystemExit) else "rejected"
+            why = f"not a valid {fmt} file" if isinstance(exc, SystemExit) else f"{type(exc).__name__}: {exc}"
             failures.append(f"as {fmt}: " + "; ".join(said + [why]))
+            continue
+        if np.asarray(m.points).size == 0:  # some text readers accept any text as an empty mesh
+            failures.append(f"as {fmt}: no points found")
             continue
         said_ok = " ".join(chatter.getvalue().split())
         if said_ok:

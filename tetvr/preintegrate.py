@@ -52,6 +52,11 @@ from .transfer import TransferFunction
 
 __all__ = ["PreintegrationTable", "build_table", "table_for"]
 
+# Largest extinction (per world unit) stored in a "normalized" table. A tiny unit distance
+# gives extinctions past float32's range: stored as inf, the shader's d * inf at d = 0 is
+# NaN. Capped, any segment longer than ~1e-28 is still opaque, which is what inf meant.
+_MAX_STORED_TAU = 1e30
+
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class PreintegrationTable:
@@ -263,10 +268,10 @@ def build_table(
         with np.errstate(invalid="ignore", divide="ignore"):
             chroma = np.where(alpha[..., None] > 1e-300, rgb / alpha[..., None], 0.0)
         table[1:, ..., :3] = np.clip(chroma, 0.0, 1.0)
-        table[:, ..., 3] = mean_tau[None]
+        table[:, ..., 3] = np.minimum(mean_tau, _MAX_STORED_TAU)[None]
         table[0, ..., :3] = mean_color if optics == "vtk" else _thin_limit(color, tau_bin, tau_node)
         if dtype == "uint8":
-            alpha_scale = float(max(mean_tau.max(), 1e-300))
+            alpha_scale = float(max(min(mean_tau.max(), _MAX_STORED_TAU), 1e-300))
             table[..., 3] /= alpha_scale
     if dtype == "uint8":
         data: NDArray[np.generic] = np.round(np.clip(table, 0.0, 1.0) * 255.0).astype(np.uint8)

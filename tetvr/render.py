@@ -14,6 +14,11 @@ from .transfer import TransferFunction
 
 __all__ = ["render", "default_transfer_function"]
 
+# The GPU computes in float32 (points relative to the mesh centre, squared lengths in the
+# classification). Measured on one tet: exact for extents 1e-15 .. 1e19, blank or wrong
+# outside; these bounds keep a margin.
+GPU_EXTENT_RANGE = (1e-13, 1e18)
+
 
 def default_transfer_function(mesh: TetMesh, *, preset: str = "viridis", opacity: float = 0.5) -> TransferFunction:
     """A preset over the mesh's scalar range; unit distance 1/20 of the mesh's diagonal."""
@@ -51,6 +56,12 @@ def render(
     >>> import tetvr                                           # doctest: +SKIP
     >>> image = tetvr.render(tetvr.read("mesh.vtu"), size=(256, 256))
     """
+    if not isinstance(mesh, TetMesh):
+        raise TypeError(f"mesh must be a TetMesh (see tetvr.read), got {type(mesh).__name__}")
+    for name, value, cls in (("camera", camera, Camera), ("tf", tf, TransferFunction),
+                             ("settings", settings, RenderSettings)):
+        if value is not None and not isinstance(value, cls):
+            raise TypeError(f"{name} must be a {cls.__name__} or None, got {type(value).__name__}")
     camera = camera or Camera.fit(mesh)
     tf = tf or default_transfer_function(mesh)
     if method == "reference":
@@ -59,6 +70,13 @@ def render(
         return render_reference(mesh, camera, tf, size, **kwargs)
     if method != "gpu":
         raise ValueError(f"method must be 'gpu' or 'reference', got {method!r}")
+    extent = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
+    if not GPU_EXTENT_RANGE[0] <= extent <= GPU_EXTENT_RANGE[1]:
+        raise ValueError(
+            f"the mesh's extent ({extent:.3g}, its bounding-box diagonal) is outside "
+            f"{GPU_EXTENT_RANGE[0]:g} .. {GPU_EXTENT_RANGE[1]:g}, where the GPU's float32 arithmetic is exact; "
+            "rescale the mesh (with the camera and unit_distance) or use method='reference'"
+        )
     from .gl.renderer import Renderer
 
     with Renderer(settings) as renderer:

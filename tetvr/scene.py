@@ -28,6 +28,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 
 from .camera import Camera
 from .mesh import TetMesh, read
@@ -63,19 +64,25 @@ class Scene:
             raise ValueError(f"unknown scene keys {sorted(unknown)}; allowed: {sorted(_KEYS)}")
         if "mesh" not in data:
             raise ValueError("the scene has no 'mesh' key (the path of the mesh file)")
-        path = Path(base_dir) / data["mesh"]
+        if not isinstance(data["mesh"], str) or not data["mesh"]:
+            raise ValueError(f"scene 'mesh' must be the path of a mesh file (a string), got {data['mesh']!r}")
         scalars = data.get("scalars")
+        if scalars is not None and not isinstance(scalars, str):
+            raise ValueError(f"scene 'scalars' must be a field name or null, got {scalars!r}")
         component = data.get("component")
+        if component is not None and (isinstance(component, bool) or not isinstance(component, int)):
+            raise ValueError(f"scene 'component' must be an integer or null, got {component!r}")
+        # The cheap checks come before the mesh is read.
+        size = _int_pair(data.get("size", [512, 512]))
+        bg = _background(data.get("background", [1.0, 1.0, 1.0]))
+        settings_spec = data.get("settings", {})
+        if not isinstance(settings_spec, dict):
+            raise ValueError(f"scene 'settings' must be an object of RenderSettings fields, got {settings_spec!r}")
+        settings = RenderSettings.from_dict(settings_spec)
+        path = Path(base_dir) / data["mesh"]
         mesh = read(path, scalars, component=component)
         tf = _transfer_function(data.get("transfer_function", {"preset": "viridis"}), mesh)
         camera = _camera(data.get("camera", {"fit": {}}), mesh)
-        size = tuple(int(v) for v in data.get("size", (512, 512)))
-        if len(size) != 2 or min(size) < 1:
-            raise ValueError(f"size must be [width, height] with positive integers, got {data.get('size')!r}")
-        bg = tuple(float(v) for v in data.get("background", (1.0, 1.0, 1.0)))
-        if len(bg) != 3:
-            raise ValueError(f"background must be [r, g, b], got {data.get('background')!r}")
-        settings = RenderSettings.from_dict(data.get("settings", {}))
         return cls(mesh_path=str(path), mesh=mesh, tf=tf, camera=camera, size=size,  # type: ignore[arg-type]
                    background=bg, settings=settings, scalars=mesh.scalar_name, component=component)  # type: ignore[arg-type]
 
@@ -99,12 +106,43 @@ class Scene:
 
 def load_scene(path: str | os.PathLike[str]) -> Scene:
     """Read a scene JSON file (see the module docstring for the schema)."""
+    if os.path.isdir(path):
+        raise ValueError(f"{path}: is a directory, not a scene JSON file")
     try:
-        with open(path) as f:
-            data = json.load(f)
+        with open(path, encoding="utf-8") as f:
+            data = json.load(f, object_pairs_hook=_no_duplicate_keys)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: not valid JSON ({exc})") from exc
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not valid JSON (not UTF-8 text: {exc})") from exc
     return Scene.from_dict(data, base_dir=Path(path).resolve().parent)
+
+
+def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    # json.load keeps the last of repeated keys silently; a scene says one thing once.
+    keys = [k for k, _ in pairs]
+    dup = sorted({k for k in keys if keys.count(k) > 1})
+    if dup:
+        raise ValueError(f"repeated keys {dup} in a scene object")
+    return dict(pairs)
+
+
+def _int_pair(value: Any) -> tuple[int, int]:
+    ok = (isinstance(value, (list, tuple)) and len(value) == 2
+          and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 1 for v in value))
+    if not ok:
+        raise ValueError(f"scene 'size' must be [width, height], two positive integers, got {value!r}")
+    return int(value[0]), int(value[1])
+
+
+def _background(value: Any) -> tuple[float, float, float]:
+    try:
+        bg = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        bg = np.zeros(0)
+    if isinstance(value, str) or bg.shape != (3,) or not np.all((bg >= 0) & (bg <= 1)):
+        raise ValueError(f"scene 'background' must be [r, g, b] with components in [0, 1], got {value!r}")
+    return float(bg[0]), float(bg[1]), float(bg[2])
 
 
 def _transfer_function(spec: dict[str, Any], mesh: TetMesh) -> TransferFunction:
@@ -116,14 +154,18 @@ def _transfer_function(spec: dict[str, Any], mesh: TetMesh) -> TransferFunction:
     if unknown:
         raise ValueError(f"unknown transfer_function keys {sorted(unknown)}")
     base = default_transfer_function(mesh)
-    rng = spec.get("range") or mesh.scalar_range
-    if rng[1] <= rng[0]:
-        rng = base.domain
-    u = spec.get("unit_distance") or base.unit_distance
-    opacity = spec.get("opacity", 0.5)
-    if isinstance(opacity, list):
-        opacity = [tuple(p) for p in opacity]
-    return TransferFunction.preset(spec["preset"], tuple(rng), opacity=opacity, unit_distance=u)
+    rng = spec.get("range")
+    if rng is None:
+        rng = mesh.scalar_range
+        if rng[1] <= rng[0]:  # a constant field: the default function's small range around it
+            rng = base.domain
+    elif not (isinstance(rng, (list, tuple)) and len(rng) == 2):
+        raise ValueError(f"transfer_function 'range' must be [lo, hi] or null, got {rng!r}")
+    # 0 is not "unset": only null takes the default (TransferFunction rejects 0).
+    u = spec.get("unit_distance")
+    if u is None:
+        u = base.unit_distance
+    return TransferFunction.preset(spec["preset"], tuple(rng), opacity=spec.get("opacity", 0.5), unit_distance=u)
 
 
 def _camera(spec: dict[str, Any], mesh: TetMesh) -> Camera:
@@ -132,6 +174,8 @@ def _camera(spec: dict[str, Any], mesh: TetMesh) -> Camera:
     if "fit" in spec:
         if set(spec) != {"fit"}:
             raise ValueError(f"a fitted camera takes only 'fit', got keys {sorted(spec)}")
+        if not isinstance(spec["fit"], dict):
+            raise ValueError(f"camera 'fit' must be an object of Camera.fit options, got {spec['fit']!r}")
         fit = dict(spec["fit"])
         allowed = {"direction", "view_up", "view_angle", "parallel", "zoom"}
         unknown = set(fit) - allowed

@@ -46,7 +46,13 @@ PRESETS: dict[str, tuple[tuple[float, float, float, float], ...]] = {
 
 
 def _points(value: ArrayLike, width: int, name: str) -> tuple[tuple[float, ...], ...]:
-    arr = np.asarray(value, dtype=np.float64)
+    rows = "(x, r, g, b)" if width == 4 else "(x, a)"
+    if isinstance(value, (str, bytes)):
+        raise ValueError(f"{name} must be a sequence of {rows} rows, got {value!r}")
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:  # ragged rows, non-numbers
+        raise ValueError(f"{name} must be a sequence of {rows} rows of numbers, got {value!r} ({exc})") from None
     if arr.ndim != 2 or arr.shape[1] != width or arr.shape[0] < 1:
         raise ValueError(
             f"{name} must be a sequence of {'(x, r, g, b)' if width == 4 else '(x, a)'} rows, "
@@ -55,10 +61,15 @@ def _points(value: ArrayLike, width: int, name: str) -> tuple[tuple[float, ...],
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or Inf: {arr.tolist()}")
     x = arr[:, 0]
-    if np.any(np.diff(x) < 0):
+    with np.errstate(over="ignore"):  # an overflowing difference is still positive
+        dx = np.diff(x)
+        span = x[-1] - x[0]
+    if np.any(dx < 0):
         raise ValueError(f"{name} positions must be sorted ascending, got {x.tolist()}")
-    if np.any(np.diff(x) == 0):
-        raise ValueError(f"{name} has duplicate positions {x[np.nonzero(np.diff(x) == 0)[0]].tolist()}")
+    if np.any(dx == 0):
+        raise ValueError(f"{name} has duplicate positions {x[np.nonzero(dx == 0)[0]].tolist()}")
+    if not np.isfinite(span):
+        raise ValueError(f"{name} positions span more than float64 can hold: {x[0]} .. {x[-1]}")
     vals = arr[:, 1:]
     if np.any(vals < 0) or np.any(vals > 1):
         raise ValueError(f"{name} values must lie in [0, 1], got {vals.min()} .. {vals.max()}")
@@ -90,8 +101,11 @@ class TransferFunction:
     def __post_init__(self) -> None:
         object.__setattr__(self, "color", _points(self.color, 4, "color"))
         object.__setattr__(self, "opacity", _points(self.opacity, 2, "opacity"))
-        u = float(self.unit_distance)
-        if not np.isfinite(u) or u <= 0:
+        try:
+            u = float(self.unit_distance)
+        except (TypeError, ValueError):
+            raise ValueError(f"unit_distance must be a positive finite number, got {self.unit_distance!r}") from None
+        if isinstance(self.unit_distance, (bool, np.bool_)) or not np.isfinite(u) or u <= 0:
             raise ValueError(f"unit_distance must be a positive finite number, got {self.unit_distance!r}")
         object.__setattr__(self, "unit_distance", u)
 
@@ -110,14 +124,22 @@ class TransferFunction:
         """
         if name not in PRESETS:
             raise ValueError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}")
-        lo, hi = (float(v) for v in scalar_range)
-        if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
+        try:
+            lo, hi = (float(v) for v in scalar_range)
+        except (TypeError, ValueError):
+            raise ValueError(f"scalar_range must be two numbers (lo, hi), got {scalar_range!r}") from None
+        with np.errstate(over="ignore"):
+            finite = bool(np.isfinite(lo) and np.isfinite(hi) and np.isfinite(np.float64(hi) - lo))
+        if not finite or hi <= lo:
             raise ValueError(f"scalar_range must be finite with lo < hi, got {scalar_range!r}")
         color = tuple((lo + (hi - lo) * p, r, g, b) for p, r, g, b in PRESETS[name])
-        if np.isscalar(opacity):
-            op: tuple[tuple[float, float], ...] = ((lo, float(opacity)), (hi, float(opacity)))  # type: ignore[arg-type]
-        else:
-            op = tuple((lo + (hi - lo) * float(t), float(a)) for t, a in opacity)  # type: ignore[union-attr]
+        try:
+            if np.isscalar(opacity):
+                op: tuple[tuple[float, float], ...] = ((lo, float(opacity)), (hi, float(opacity)))  # type: ignore[arg-type]
+            else:
+                op = tuple((lo + (hi - lo) * float(t), float(a)) for t, a in opacity)  # type: ignore[union-attr]
+        except (TypeError, ValueError):
+            raise ValueError(f"opacity must be a number or (t, a) rows with t in [0, 1], got {opacity!r}") from None
         return cls(color=color, opacity=op, unit_distance=unit_distance)
 
     @property
@@ -156,11 +178,8 @@ class TransferFunction:
         missing = {"color", "opacity"} - set(data)
         if missing:
             raise ValueError(f"transfer function is missing keys {sorted(missing)}")
-        return cls(
-            color=tuple(tuple(p) for p in data["color"]),
-            opacity=tuple(tuple(p) for p in data["opacity"]),
-            unit_distance=data.get("unit_distance", 1.0),
-        )
+        # __post_init__ checks the shapes and turns the rows into tuples.
+        return cls(color=data["color"], opacity=data["opacity"], unit_distance=data.get("unit_distance", 1.0))
 
     def digest(self) -> str:
         """A stable hash of the function, used to cache pre-integration tables."""

@@ -23,8 +23,14 @@ draw a premultiplied image with ``ONE``) over the renderer's background, which w
 black with alpha 0, into an RGBA8 window: so the window holds *premultiplied* colour and
 the accumulated alpha, 8 bits per channel, and is read back as such.
 
-VTK is optional (``pip install "tetvr[compare]"``): this module imports it only when a
-VTK renderer is made, and :func:`vtk_status` says whether it can render here.
+VTK runs in a child process (:class:`VTKProcess`). In one process, VTK's EGL window and
+tetvr's moderngl context do not coexist: once VTK has made its window current on the EGL
+display they share, glcontext's ``eglMakeCurrent`` no longer takes effect, so tetvr's GL
+calls land in VTK's context (``GL_INVALID_OPERATION``; VTK 9.7.2, glcontext 3.1.0, Mesa
+llvmpipe). A separate process is also how ParaView runs next to an application.
+
+VTK is optional (``pip install "tetvr[compare]"``): this module imports it only in the
+VTK process, and :func:`vtk_status` says whether it can render here.
 :data:`PARITY_SETTINGS` are tetvr's settings closest to the "Projected tetra" convention.
 """
 
@@ -53,11 +59,13 @@ from .transfer import TransferFunction
 __all__ = [
     "MAPPERS",
     "PARITY_SETTINGS",
+    "VTKProcess",
     "VTKRenderer",
     "VTKUnavailableError",
     "compare",
     "orbit",
-    "vtk_order",
+    "quantize8",
+    "tile_images",
     "vtk_status",
     "write_report",
 ]
@@ -72,10 +80,10 @@ MAPPERS: dict[str, tuple[str, str]] = {
 #: tetvr's closest match to VTK's projected tetrahedra (docs/paraview.md): VTK's fragment
 #: formula (``tau = a/u``, mean end colour, see :func:`tetvr.optics.vtk_segments`) with
 #: screen-linear interpolation like VTK's ``w = 1`` vertices. VTK composites in a float
-#: target and quantises the colours of the vertices and the final image to 8 bits; tetvr's
-#: tables and target stay float here and :func:`compare` quantises the final image, so the
-#: remaining differences are the ones docs/paraview.md lists. Render it with
-#: ``order=vtk_order(mesh, camera)`` to use VTK's sort key as well.
+#: target (``UseFloatingPointFrameBuffer``, on by default) and rounds to 8 bits once, when
+#: it copies to the window: so the table and target stay float here and :func:`compare`
+#: rounds the final image (an 8-bit target, rounding at every blend, measured 6 dB further
+#: from VTK). The remaining differences are listed in docs/paraview.md.
 PARITY_SETTINGS = RenderSettings(optics="vtk", perspective_correct=False)
 
 
@@ -120,22 +128,23 @@ def vtk_status() -> tuple[bool, str]:
     -------
     (ok, description) : e.g. ``(True, "VTK 9.7.2, vtkEGLRenderWindow, llvmpipe (...)")``.
     """
-    try:
-        mods = _import_vtk()
-    except VTKUnavailableError as exc:
-        return False, str(exc)
+    import importlib.util
+
+    if importlib.util.find_spec("vtkmodules") is None:
+        return False, "VTK is not installed; pip install 'tetvr[compare]'"
     from .synthetic import single_tet
 
     mesh = single_tet((0.0, 0.3, 0.6, 1.0))
     tf = TransferFunction.preset("grayscale", (0.0, 1.0), opacity=0.9, unit_distance=0.5)
     try:
-        with VTKRenderer(mesh, tf, mapper="pt", size=(16, 16)) as r:
+        with VTKProcess(mesh, tf, mapper="pt", size=(16, 16), timeout=120.0) as r:
             image = r.render(Camera.fit(mesh, direction=(0.3, -0.2, -1.0)))
-            what = f"VTK {mods.version}, {r.window_class}, {r.gl_renderer}"
-    except Exception as exc:  # any failure to open a window or render means "unavailable"
-        return False, f"VTK {mods.version} cannot render offscreen here: {type(exc).__name__}: {exc}"
+            info = r.info
+    except (VTKUnavailableError, RuntimeError, OSError) as exc:
+        return False, f"VTK cannot render offscreen here: {exc}"
+    what = f"VTK {info['version']}, {info['window']}, {info['gl_renderer']}"
     if not image[..., 3].max() > 0:
-        return False, f"VTK {mods.version} rendered an empty image offscreen"
+        return False, f"{what}: rendered an empty image offscreen"
     return True, what
 
 
@@ -190,6 +199,9 @@ def _set_camera(vtk_camera: Any, camera: Camera) -> None:
 
 class VTKRenderer:
     """One VTK mapper in its own offscreen window; many frames of one mesh.
+
+    Use it in a process without tetvr's GL renderer (see the module notes); next to
+    tetvr, use :class:`VTKProcess`, which runs one of these in a child process.
 
     Parameters
     ----------
@@ -291,6 +303,130 @@ def _gl_renderer(window: Any) -> str:
     return "unknown"
 
 
+class VTKProcess:
+    """A :class:`VTKRenderer` in a child process, so that it can run next to tetvr.
+
+    Same parameters as :class:`VTKRenderer`, plus ``timeout`` (seconds to wait for any
+    one reply). :attr:`last_seconds` is the time of the last frame *inside* the child,
+    from the camera change to the image read back into numpy, without the transfer
+    between processes; :attr:`first_seconds` is the same for the first frame, from the
+    window's creation on (it does not count starting Python and importing VTK).
+    :attr:`info` holds the VTK version, window class, mapper class and GL renderer.
+
+    Examples
+    --------
+    >>> with VTKProcess(mesh, tf, mapper="pt", size=(256, 256)) as r:  # doctest: +SKIP
+    ...     image = r.render(camera)
+    ...     r.last_seconds
+    """
+
+    def __init__(self, mesh: TetMesh, tf: TransferFunction, *, mapper: str = "pt",
+                 size: tuple[int, int] = (512, 512), timeout: float = 600.0) -> None:
+        import multiprocessing
+
+        if mapper not in MAPPERS:
+            raise ValueError(f"mapper must be one of {sorted(MAPPERS)}, got {mapper!r}")
+        self.timeout = float(timeout)
+        self.last_seconds = float("nan")
+        self.first_seconds = float("nan")
+        self.info: dict[str, Any] = {}
+        self._first = True
+        # "spawn": a fresh interpreter that has never touched this process's GL state.
+        ctx = multiprocessing.get_context("spawn")
+        self._conn, child = ctx.Pipe()
+        grid = {"points": np.asarray(mesh.points), "tets": np.asarray(mesh.tets),
+                "scalars": np.asarray(mesh.scalars), "scalar_name": mesh.scalar_name}
+        self._proc: Any = ctx.Process(target=_vtk_worker, args=(child, grid, tf.to_dict(), mapper,
+                                                               tuple(int(v) for v in size)), daemon=True)
+        self._proc.start()
+        child.close()
+        self.info = self._reply()
+
+    def _reply(self) -> Any:
+        if not self._conn.poll(self.timeout):
+            self.release()
+            raise RuntimeError(f"the VTK process did not answer within {self.timeout:.0f} s")
+        try:
+            kind, payload = self._conn.recv()
+        except EOFError:
+            code = self._proc.exitcode
+            self.release()
+            raise RuntimeError(f"the VTK process died (exit code {code})") from None
+        if kind == "error":
+            self.release()
+            raise VTKUnavailableError(payload) if payload.startswith("VTK is not installed") else RuntimeError(payload)
+        return payload
+
+    def __enter__(self) -> "VTKProcess":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+    def render(self, camera: Camera) -> NDArray[np.float32]:
+        """Render one frame in the child: (height, width, 4) float32 premultiplied RGBA."""
+        if self._proc is None:
+            raise RuntimeError("this VTKProcess has been released")
+        self._conn.send(camera.to_dict())
+        image, seconds, info = self._reply()
+        self.info.update(info)
+        self.last_seconds = seconds
+        if self._first:
+            self.first_seconds, self._first = seconds + self.info.get("setup_seconds", 0.0), False
+        return image
+
+    def release(self) -> None:
+        """Stop the child process. Safe to call twice."""
+        proc, self._proc = getattr(self, "_proc", None), None
+        if proc is None:
+            return
+        try:
+            self._conn.send(None)
+        except (OSError, ValueError):
+            pass
+        proc.join(timeout=10)
+        if proc.is_alive():
+            proc.terminate()
+            proc.join(timeout=5)
+        self._conn.close()
+
+
+def _vtk_worker(conn: Any, grid: dict[str, Any], tf_dict: dict[str, Any], mapper: str,
+                size: tuple[int, int]) -> None:
+    """The child of :class:`VTKProcess`: renders cameras it is sent until it gets None."""
+    import types
+
+    try:
+        t0 = time.perf_counter()
+        renderer = VTKRenderer(types.SimpleNamespace(**grid, n_tets=len(grid["tets"])),  # type: ignore[arg-type]
+                               TransferFunction.from_dict(tf_dict), mapper=mapper, size=size)
+        setup = time.perf_counter() - t0
+    except Exception as exc:
+        conn.send(("error", str(exc) if isinstance(exc, VTKUnavailableError) else f"{type(exc).__name__}: {exc}"))
+        return
+    try:
+        info = {"version": renderer._mods.version, "window": renderer.window_class,
+                "mapper_class": renderer.mapper_class, "gl_renderer": "", "setup_seconds": setup}
+        conn.send(("ok", info))
+        while True:
+            msg = conn.recv()
+            if msg is None:
+                break
+            t0 = time.perf_counter()
+            try:
+                image = renderer.render(Camera.from_dict(msg))
+            except Exception as exc:
+                conn.send(("error", f"{type(exc).__name__}: {exc}"))
+                continue
+            seconds = time.perf_counter() - t0
+            conn.send(("ok", (image, seconds, {"gl_renderer": renderer.gl_renderer,
+                                               "first_frame_renders": renderer.first_frame_renders})))
+    except (EOFError, BrokenPipeError):
+        pass
+    finally:
+        renderer.release()
+
+
 # ---------------------------------------------------------------------------- helpers
 def orbit(camera: Camera, degrees: float) -> Camera:
     """The camera turned about its view-up axis through the focal point (vtkCamera.Azimuth)."""
@@ -300,14 +436,6 @@ def orbit(camera: Camera, degrees: float) -> Camera:
     a = math.radians(degrees)
     rotated = (p * math.cos(a) + np.cross(axis, p) * math.sin(a) + axis * (axis @ p) * (1 - math.cos(a)))
     return dataclasses.replace(camera, position=tuple(np.asarray(camera.focal_point) + rotated))
-
-
-def vtk_order(mesh: TetMesh, camera: Camera) -> NDArray[np.int64]:
-    """Cells back to front as ``vtkCellCenterDepthSort`` orders them: by the centroid's
-    projection on the view direction, for perspective views too (tetvr's ``"centroid"``
-    sort uses the distance to the eye there)."""
-    key = mesh.centroids @ np.asarray(camera.direction)
-    return np.argsort(-key, kind="stable")
 
 
 def quantize8(image: NDArray[np.floating[Any]]) -> NDArray[np.float32]:
@@ -403,11 +531,11 @@ def compare(
         meth = _Method(key, label, "tetvr", info={"settings": settings.to_dict()})
         t0 = time.perf_counter()
         with Renderer(settings) as r:
-            image = r.render(mesh, camera, tf, size=size, order=vtk_order(mesh, camera) if parity else None)
+            image = r.render(mesh, camera, tf, size=size)
             meth.first_frame_s = time.perf_counter() - t0
             for cam in cams:
                 t0 = time.perf_counter()
-                r.render(mesh, cam, tf, size=size, order=vtk_order(mesh, cam) if parity else None)
+                r.render(mesh, cam, tf, size=size)
                 meth.view_change_s.append(time.perf_counter() - t0)
             meth.info["gl_renderer"] = r.gl_info.get("GL_RENDERER", "")
         meth.image = quantize8(image) if parity else image
@@ -423,17 +551,15 @@ def compare(
     for key in mappers:
         cls, pv_name = MAPPERS[key]
         meth = _Method(f"vtk_{key}", f'VTK {cls} (ParaView "{pv_name}")', "vtk")
-        t0 = time.perf_counter()
-        with VTKRenderer(mesh, tf, mapper=key, size=size) as r:
+        # Timed inside the VTK process (VTKProcess): without starting it and moving images.
+        with VTKProcess(mesh, tf, mapper=key, size=size) as r:
             image = r.render(camera)
-            meth.first_frame_s = time.perf_counter() - t0
+            meth.first_frame_s = r.first_seconds
             for cam in cams:
-                t0 = time.perf_counter()
                 r.render(cam)
-                meth.view_change_s.append(time.perf_counter() - t0)
-            meth.info.update(mapper_class=r.mapper_class, window=r.window_class, gl_renderer=r.gl_renderer,
-                             first_frame_renders=r.first_frame_renders)
-            vtk_info.update(version=r._mods.version, window=r.window_class, gl_renderer=r.gl_renderer)
+                meth.view_change_s.append(r.last_seconds)
+            meth.info.update(r.info)
+            vtk_info.update(version=r.info["version"], window=r.info["window"], gl_renderer=r.info["gl_renderer"])
         meth.image = image
         methods.append(meth)
         say(f"{meth.label}: first {meth.first_frame_s:.3f} s, view change {statistics.median(meth.view_change_s):.3f} s")
@@ -461,6 +587,11 @@ def _table(scene: Any, size: tuple[int, int], views: int, step: float, methods: 
                                "mean_alpha": float(m.image[..., 3][covered].mean()) if covered.any() else 0.0}
         row.update(m.info)
         rows.append(row)
+    pt = next((m.image for m in methods if m.key == "vtk_pt"), None)
+    for row, m in zip(rows, methods):
+        if pt is not None:
+            row["psnr_vs_vtk_pt"] = psnr(m.image, pt)
+            row["max_abs_diff_vs_vtk_pt"] = float(np.abs(m.image.astype(np.float64) - pt).max())
     tetvr_row = next((r for r in rows if r["key"] == "tetvr"), None)
     for row in rows:
         if tetvr_row and row["view_change_s"] and tetvr_row["view_change_s"]:
@@ -505,24 +636,28 @@ def write_report(result: dict[str, Any], outdir: str | os.PathLike[str], *,
                 d[..., 3] = 1.0
                 write_png(d, out / f"{key}_diff.png", background=None)
                 diffs.append(d)
-        write_png(_row(tiles), out / "side_by_side.png", background=(0, 0, 0))
+        write_png(tile_images(tiles), out / "side_by_side.png", background=(0, 0, 0))
         if diffs:
-            write_png(_row(diffs), out / "differences.png", background=(0, 0, 0))
+            write_png(tile_images(diffs), out / "differences.png", background=(0, 0, 0))
     (out / "comparison.md").write_text(_markdown(result, diff_gain))
     return out
 
 
-def _row(images: list[NDArray[np.float32]], gap: int = 4) -> NDArray[np.float32]:
-    h = images[0].shape[0]
-    sep = np.zeros((h, gap, 4), dtype=np.float32)
-    sep[..., :3] = 0.5
-    sep[..., 3] = 1.0
-    parts: list[NDArray[np.float32]] = []
+def tile_images(images: list[NDArray[np.float32]], cols: int = 4, gap: int = 4) -> NDArray[np.float32]:
+    """Images of one size tiled in reading order, ``cols`` per row, on a grey grid."""
+    h, w = images[0].shape[:2]
+    rows = -(-len(images) // cols)
+    cols = min(cols, len(images))
+    out = np.zeros((rows * h + (rows - 1) * gap, cols * w + (cols - 1) * gap, 4), dtype=np.float32)
+    out[..., :3] = 0.5
+    out[..., 3] = 1.0
     for i, img in enumerate(images):
-        if i:
-            parts.append(sep)
-        parts.append(img.astype(np.float32))
-    return np.concatenate(parts, axis=1)
+        r, c = divmod(i, cols)
+        out[r * (h + gap):r * (h + gap) + h, c * (w + gap):c * (w + gap) + w] = img
+    for i in range(len(images), rows * cols):
+        r, c = divmod(i, cols)
+        out[r * (h + gap):r * (h + gap) + h, c * (w + gap):c * (w + gap) + w] = (0, 0, 0, 1)
+    return out
 
 
 def _fmt(v: Any, spec: str) -> str:
@@ -544,15 +679,17 @@ def _markdown(result: dict[str, Any], gain: float) -> str:
              "Error: PSNR (dB) and RMSE of premultiplied RGB against tetvr's CPU reference in each "
              "convention (`exact`: tau = -ln(1-a)/u; `linear`: tau = a/u; `vtk`: VTK's projected-"
              "tetrahedra segment formula on exact geometry; see docs/paraview.md).", "",
-             "| method | first frame (s) | view change (s) | vs tetvr | "
-             + " | ".join(f"PSNR {o}" for o in refs) + " | RMSE exact | max abs err |",
-             "|---|---|---|---|" + "---|" * len(refs) + "---|---|"]
-    for m in result["methods"]:
+             "| # | method | first frame (s) | view change (s) | / tetvr | "
+             + " | ".join(f"PSNR {o}" for o in refs) + " | PSNR vs VTK PT | RMSE exact | max abs err |",
+             "|---|---|---|---|---|" + "---|" * len(refs) + "---|---|---|"]
+    for i, m in enumerate(result["methods"]):
         lines.append(
-            f"| {m['label']} | {_fmt(m['first_frame_s'], '.3f')} | {_fmt(m['view_change_s'], '.3f')} | "
+            f"| {i + 1} | {m['label']} | {_fmt(m['first_frame_s'], '.3f')} | {_fmt(m['view_change_s'], '.3f')} | "
             f"{_fmt(m.get('view_change_vs_tetvr'), '.2f')} | "
             + " | ".join(_fmt(m["psnr"][o], ".1f") for o in refs)
-            + f" | {_fmt(m['rmse']['exact'], '.2e')} | {_fmt(m['max_abs_error'], '.3f')} |")
-    lines += ["", "Pictures, left to right in the table's order: `side_by_side.png` (over black) and "
-              f"`differences.png` (|image - exact reference| x {gain:g}).", ""]
+            + f" | {_fmt(m.get('psnr_vs_vtk_pt'), '.1f')} | {_fmt(m['rmse']['exact'], '.2e')}"
+            f" | {_fmt(m['max_abs_error'], '.3f')} |")
+    lines += ["", "Pictures, numbered as the table, four to a row, left to right: `side_by_side.png` "
+              f"(over black) and `differences.png` (|image - exact reference| x {gain:g}); one "
+              "`<key>.png` and `<key>_diff.png` per method.", ""]
     return "\n".join(lines)

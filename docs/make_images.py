@@ -1,0 +1,245 @@
+"""Generate the pictures of the guide (docs/*.md) with tetvr itself.
+
+    pip install -e ".[bench]"             # matplotlib, for the labelled panels
+    python docs/make_images.py            # everything, ~1 minute on llvmpipe
+    python docs/make_images.py methods    # one group: quickstart, methods, fusion, limits, interactive
+
+Every picture under docs/images/guide/ comes from this script; docs/images/demo.png from
+`tetvr demo -o docs/images/demo.png`; docs/images/fusion/ from
+`tetvr fusion-demo -o docs/images/fusion`. Each panel title states what it shows and,
+where there is a reference, the PSNR (dB, premultiplied RGB) against the exact CPU
+renderer. Difference panels are magnified by the factor in their title.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import tetvr
+from tetvr import Camera, RenderSettings, TransferFunction, synthetic
+from tetvr.image import composite_over, psnr
+from tetvr.reference import render_reference
+from tetvr.stability import CASES, case
+
+HERE = Path(__file__).resolve().parent
+OUT = HERE / "images" / "guide"
+ROOT = HERE.parent
+
+
+def panels(images, titles, path, *, background=(0, 0, 0), suptitle=None, cols=None, size_in=2.2):
+    """Images side by side (or in rows of ``cols``) with titles, as one PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(images)
+    cols = cols or n
+    rows = (n + cols - 1) // cols
+    h, w = images[0].shape[:2]
+    fig, axes = plt.subplots(rows, cols, figsize=(size_in * cols, size_in * h / w * rows + 0.45 * rows + 0.3),
+                             squeeze=False)
+    for ax in axes.ravel():
+        ax.set_axis_off()
+    for ax, img, title in zip(axes.ravel(), images, titles):
+        ax.imshow(np.clip(composite_over(img, background)[..., :3], 0, 1), interpolation="nearest")
+        ax.set_title(title, fontsize=8)
+    if suptitle:
+        fig.suptitle(suptitle, fontsize=10)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    print("wrote", path.relative_to(ROOT))
+
+
+def _diff(a, b, k):
+    d = np.zeros_like(a)
+    d[..., :3] = np.clip(np.abs(a[..., :3] - b[..., :3]) * k, 0, 1)
+    d[..., 3] = 1.0
+    return d
+
+
+def _nice(k: float) -> int:
+    """A round magnification near k (1, 2, 5, 10, 20, ...)."""
+    k = max(k, 1.0)
+    e = 10 ** int(np.floor(np.log10(k)))
+    return int(max(m * e for m in (1, 2, 5) if m * e <= k))
+
+
+def _tf(mesh, opacity, units, preset="viridis"):
+    diag = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
+    return TransferFunction.preset(preset, mesh.scalar_range, opacity=opacity, unit_distance=diag / units)
+
+
+# ---------------------------------------------------------------- scenes
+def post_scene():
+    s = tetvr.load_scene(tetvr.demo_scene_path())
+    return s.mesh, s.camera, s.tf
+
+
+def close_perspective():
+    m = synthetic.cube(8)
+    return m, Camera.fit(m, direction=(-0.3, -0.2, -1.0), view_angle=60, zoom=1.6), \
+        _tf(m, [(0, 0.2), (0.5, 0.6), (1, 0.9)], 4)
+
+
+def rings():
+    r = synthetic.interlocking_rings(16, 1)
+    return r, Camera.fit(r, direction=(-0.5, -1.0, -0.6), view_up=(0, 0, 1)), _tf(r, [(0, 0.9), (1, 0.9)], 6)
+
+
+def stability(name):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        c = case(name)
+    return c.mesh, c.camera, c.tf
+
+
+# ---------------------------------------------------------------- groups
+def quickstart():
+    mesh, cam, _ = post_scene()
+    from tetvr.colormaps import colormap
+
+    names = ["viridis", "cool-to-warm", "hot", "grayscale", "magma"]
+    ramp = [(0.0, 0.0), (0.2, 0.05), (0.5, 0.3), (0.8, 0.8), (1.0, 1.0)]
+    with tetvr.Renderer() as r:
+        imgs = [r.render(mesh, cam, colormap(n, (0.45, 1.4), opacity=ramp, unit_distance=0.25), size=(240, 180))
+                for n in names]
+        panels(imgs, names, OUT / "colormaps.png", background=(0.08, 0.08, 0.1),
+               suptitle="post.vtk, Pressure, one opacity ramp, five colour maps")
+        units = [0.08, 0.25, 1.0]
+        imgs = [r.render(mesh, cam, TransferFunction.preset("viridis", (0.45, 1.4), opacity=ramp, unit_distance=u),
+                         size=(240, 180)) for u in units]
+        panels(imgs, [f"unit_distance = {u}" for u in units], OUT / "unit_distance.png", background=(0.08, 0.08, 0.1),
+               suptitle="the same opacity points, three unit distances")
+
+
+#: setting name -> (scene, variant settings, what it shows)
+METHOD_PICTURES = {
+    "perspective_correct": (close_perspective, RenderSettings(perspective_correct=False),
+                            "perspective_correct=False: scalars and thickness linear in screen space"),
+    "table_encoding": (close_perspective, RenderSettings(table_encoding="premultiplied"),
+                       "table_encoding='premultiplied': alpha interpolated across thickness slices"),
+    "table_filter": (close_perspective, RenderSettings(table_encoding="premultiplied", table_filter="cubic"),
+                     "premultiplied table with table_filter='cubic' (compare with the one above)"),
+    "table_dtype": (post_scene, RenderSettings(table_dtype="uint8"), "table_dtype='uint8': 8-bit table"),
+    "framebuffer": (post_scene, RenderSettings(framebuffer="uint8"), "framebuffer='uint8': 8-bit compositing"),
+    "table_scalar_bins": (lambda: stability("spike_tf"), RenderSettings(table_scalar_bins=64),
+                          "table_scalar_bins=64 on a thin opacity spike (iso-layer)"),
+    "table_thickness_slices": (close_perspective, RenderSettings(table_thickness_slices=8, table_log_base=4.0),
+                               "table_thickness_slices=8, table_log_base=4"),
+    "sort_none": (rings, RenderSettings(sort="none"), "sort='none': cells drawn in input order"),
+    "sort_mpvonc": (close_perspective, RenderSettings(sort="mpvonc"),
+                    "sort='mpvonc' where centroid order is slightly wrong"),
+    "optics_vtk": (post_scene, RenderSettings(optics="vtk", perspective_correct=False),
+                   "optics='vtk' + screen-linear: VTK's projected-tetrahedra convention"),
+}
+
+
+def methods(size=(160, 160)):
+    summary = {}
+    refs = {}
+    for name, (make, settings, what) in METHOD_PICTURES.items():
+        mesh, cam, tf = make()
+        key = id(make) if make not in (post_scene, close_perspective, rings) else make.__name__
+        if key not in refs:
+            refs[key] = render_reference(mesh, cam, tf, size)
+        ref = refs[key]
+        with tetvr.Renderer() as r:
+            base = r.render(mesh, cam, tf, size=size)
+        with tetvr.Renderer(settings) as r:
+            var = r.render(mesh, cam, tf, size=size)
+        p0, p1 = psnr(base, ref), psnr(var, ref)
+        k = _nice(0.8 / max(float(np.abs(var[..., :3] - ref[..., :3]).max()), 1e-6))
+        changed = {f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)
+                   if getattr(settings, f.name) != getattr(RenderSettings(), f.name)}
+        label = ", ".join(f"{a}={b!r}" for a, b in changed.items())
+        panels([ref, base, var, _diff(base, ref, k), _diff(var, ref, k)],
+               ["exact reference", f"default: {p0:.1f} dB", f"{label}:\n{p1:.1f} dB",
+                f"|default - ref| x {k}", f"|variant - ref| x {k}"],
+               OUT / "methods" / f"{name}.png", suptitle=what, size_in=2.0)
+        summary[name] = {"default_psnr": round(p0, 1), "variant_psnr": round(p1, 1), "magnification": k}
+    (OUT / "methods" / "psnr.json").write_text(json.dumps(summary, indent=1))
+    print("wrote", (OUT / "methods" / "psnr.json").relative_to(ROOT))
+
+
+def fusion(size=(320, 240)):
+    from tetvr import FUSION_MODES, RayTextures, fuse
+    from tetvr.examples import carotid_fusion
+
+    s = carotid_fusion()
+    w, h = size
+    end = np.ones((h, w))
+    end[:, w // 2:] = 0.55
+    textures = RayTextures(np.zeros((h, w)), end)
+    with tetvr.Renderer() as r, tetvr.Raycaster(ctx=r.ctx) as c:
+        imgs = [c.render(s.volume, s.camera, s.volume_tf, size=size), r.render(s.mesh, s.camera, s.mesh_tf, size=size)]
+        for mode in FUSION_MODES:
+            imgs.append(fuse(s.mesh, s.volume, s.camera, s.mesh_tf, s.volume_tf, size=size, mode=mode, renderer=r,
+                             raycaster=c, ray_textures=textures if mode == "ray_textures" else None))
+    titles = ["volume alone", "mesh alone", *(f"mode='{m}'" for m in FUSION_MODES)]
+    titles[-1] += "\n(right half: first 55 % of each ray)"
+    panels(imgs, titles, OUT / "fusion_modes.png", cols=3, size_in=3.0,
+           suptitle="carotid flow: speed as a volume (grey) and the fast lumen as a tet mesh (hot)")
+
+
+def limits(size=(96, 96)):
+    names = sorted(CASES)
+    gpu, diffs, titles, dtitles = [], [], [], []
+    with tetvr.Renderer() as r:
+        for name in names:
+            mesh, cam, tf = stability(name)
+            img = r.render(mesh, cam, tf, size=size)
+            ref = render_reference(mesh, cam, tf, size)
+            p = psnr(img, ref)
+            k = _nice(0.8 / max(float(np.abs(img[..., :3] - ref[..., :3]).max()), 1e-6))
+            gpu.append(img)
+            diffs.append(_diff(img, ref, k))
+            titles.append(f"{name}\n{'exact' if np.isinf(p) else f'{p:.1f} dB'}")
+            dtitles.append(f"{name}\n|GPU - ref| x {k}")
+    panels(gpu, titles, OUT / "stability_cases.png", cols=6, size_in=1.7, background=(1, 1, 1),
+           suptitle="the stability cases, default settings, 96x96 (PSNR against the reference)")
+    panels(diffs, dtitles, OUT / "stability_errors.png", cols=6, size_in=1.7,
+           suptitle="where the error is (each magnified to show its shape)")
+
+
+def interactive():
+    from tetvr.animate import orbit
+    from tetvr.widget import TransferFunctionEditor
+
+    mesh, cam, tf = post_scene()
+    ed = TransferFunctionEditor.from_transfer_function(tf, colormap="viridis")
+    img = ed.image(mesh.scalars, size=(480, 150), selected=2)
+    panels([img], ["opacity points over log10(1 + count) of the Pressure values"], OUT / "tf_editor.png",
+           size_in=5.0)
+    with tetvr.Renderer() as r:
+        frames = [r.render(mesh, c, tf, size=(160, 120)) for c in orbit(cam, 6)]
+    panels(frames, [f"{60 * k} deg" for k in range(6)], OUT / "orbit.png", cols=6, size_in=1.8,
+           background=(0.08, 0.08, 0.1), suptitle="tetvr animate demo.json --orbit 6 (frames 0..5)")
+
+
+GROUPS = {"quickstart": quickstart, "methods": methods, "fusion": fusion, "limits": limits, "interactive": interactive}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("groups", nargs="*", help=f"some of {', '.join(GROUPS)} (default: all)")
+    args = p.parse_args(argv)
+    unknown = set(args.groups) - set(GROUPS)
+    if unknown:
+        p.error(f"unknown groups {sorted(unknown)}; choose from {list(GROUPS)}")
+    for name in args.groups or GROUPS:
+        GROUPS[name]()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,326 @@
+"""The interactive viewer's logic without a browser: camera navigation, the progressive
+refinement decisions, transfer-function editing, the model (with a recording renderer),
+and the ipywidgets front-end when ipywidgets is installed."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import tetvr
+from tetvr import Camera, TransferFunction, synthetic
+from tetvr.widget import (OrbitControl, ProgressiveRefiner, RenderRequest, TransferFunctionEditor, ViewerModel,
+                          histogram_image, log_histogram, png_bytes)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+# ---------------------------------------------------------------- camera
+@pytest.fixture
+def control():
+    mesh = synthetic.cube(2)
+    cam = Camera.fit(mesh, direction=(0, 0, -1), view_up=(0, 1, 0))
+    return OrbitControl(cam, bounds=mesh.bounds, degrees_per_pixel=0.5), mesh
+
+
+def _dist(cam):
+    return float(np.linalg.norm(np.subtract(cam.position, cam.focal_point)))
+
+
+def test_azimuth_and_drag_directions(control):
+    c, _ = control
+    start = c.camera
+    right, up, _ = start.basis()
+    d0 = _dist(start)
+    moved = c.azimuth(10.0)
+    assert np.dot(np.subtract(moved.position, start.position), right) > 0  # camera to its right
+    assert _dist(moved) == pytest.approx(d0) and moved.focal_point == start.focal_point
+    c.reset()
+    # Dragging right turns the object right: the camera goes left, by 0.5 degree a pixel.
+    dragged = c.drag(20, 0)
+    assert np.dot(np.subtract(dragged.position, start.position), right) < 0
+    v0 = np.subtract(start.position, start.focal_point)
+    v1 = np.subtract(dragged.position, dragged.focal_point)
+    assert np.degrees(np.arccos(np.dot(v0, v1) / d0**2)) == pytest.approx(10.0)
+    c.reset()
+    # Dragging down tilts the camera up (it looks down on the object).
+    assert np.dot(np.subtract(c.drag(0, 20).position, start.position), up) > 0
+    assert c.reset() is start
+
+
+def test_orbit_over_the_pole_never_degenerates(control):
+    c, _ = control
+    for _ in range(30):  # 450 degrees of elevation: a trackball has no pole
+        cam = c.elevation(15.0)
+        assert abs(np.dot(cam.direction, cam.view_up)) < 1e-9
+        assert _dist(cam) == pytest.approx(_dist(c.home))
+
+
+def test_zoom_and_clipping_enclose_the_mesh(control):
+    c, mesh = control
+    d0 = _dist(c.camera)
+    cam = c.zoom(2.0)
+    assert _dist(cam) == pytest.approx(d0 / 2)
+    centre = mesh.bounds.mean(axis=0)
+    radius = 0.5 * np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])
+    for cam in (c.camera, c.zoom(0.25), c.azimuth(33), c.elevation(-71)):
+        near, far = cam.clipping_range
+        depth = np.dot(centre - np.asarray(cam.position), cam.direction)
+        assert near <= max(depth - radius, 1e-3 * radius) + 1e-12 and far >= depth + radius
+    # Dolly inside the mesh: near stays positive for a perspective camera.
+    inside = c.zoom(50.0)
+    assert 0 < inside.clipping_range[0] < inside.clipping_range[1]
+    with pytest.raises(ValueError, match="zoom factor"):
+        c.zoom(0.0)
+    par = OrbitControl(Camera.fit(mesh, parallel=True), bounds=mesh.bounds)
+    s0 = par.camera.parallel_scale
+    assert par.zoom(4.0).parallel_scale == pytest.approx(s0 / 4) and par.camera.position == par.home.position
+
+
+def test_pan_moves_eye_and_focus_together(control):
+    c, _ = control
+    start = c.camera
+    right, up, _ = start.basis()
+    cam = c.pan(10, 0, (100, 100))
+    shift = np.subtract(cam.focal_point, start.focal_point)
+    np.testing.assert_allclose(np.subtract(cam.position, start.position), shift, atol=1e-12)
+    assert np.dot(shift, right) < 0 and abs(np.dot(shift, up)) < 1e-12  # the scene follows the pointer
+
+
+# ---------------------------------------------------------------- progressive refinement
+def test_refiner_previews_while_interacting_then_refines_once():
+    r = ProgressiveRefiner((400, 300), preview_scale=0.25, settle_s=0.2)
+    assert r.state == "idle" and r.preview_size == (100, 75)
+    assert r.finish() == RenderRequest((400, 300), sort=True, final=True)  # first frame
+    assert r.poll(10.0) is None  # idle: nothing to do
+    assert r.change(1.0) == RenderRequest((100, 75), sort=False, final=False)  # previous order reused
+    assert r.change(1.1) == RenderRequest((100, 75), sort=False, final=False)
+    assert r.poll(1.25) is None  # 0.15 s after the last change: still interacting
+    assert r.state == "interacting" and r.seconds_to_refine == 0.2
+    assert r.poll(1.3) == RenderRequest((400, 300), sort=True, final=True)  # camera moved: sort
+    assert r.poll(1.4) is None and r.state == "idle"
+    # A transfer-function edit does not move the camera: the final frame keeps the order.
+    r.change(2.0, camera=False)
+    assert r.poll(2.5) == RenderRequest((400, 300), sort=False, final=True)
+    # New geometry: the next frame must sort, even a preview.
+    r.invalidate_order()
+    assert r.change(3.0, camera=False).sort is True
+    with pytest.raises(ValueError, match="preview_scale"):
+        ProgressiveRefiner((10, 10), preview_scale=0.0)
+
+
+# ---------------------------------------------------------------- transfer-function editing
+def test_editor_points_stay_ordered_and_ends_stay_put():
+    ed = TransferFunctionEditor((-2.0, 2.0), points=[(0.0, 0.1), (1.0, 0.9)], unit_distance=0.5)
+    assert ed.add_point(0.5, 0.4) == 1 and ed.add_point(0.25, 0.2) == 1
+    assert ed.points == [(0.0, 0.1), (0.25, 0.2), (0.5, 0.4), (1.0, 0.9)]
+    assert ed.add_point(0.5, 0.7) == 2 and len(ed.points) == 4  # same t: set, not insert
+    t, a = ed.move_point(1, t=0.9, a=1.5)  # clamped below its right neighbour, a into [0, 1]
+    assert t == pytest.approx(0.5 - ed.MIN_GAP) and a == 1.0
+    assert ed.move_point(0, t=0.3, a=0.0) == (0.0, 0.0)  # ends move in opacity only
+    with pytest.raises(ValueError, match="end points"):
+        ed.remove_point(3)
+    ed.remove_point(1)
+    assert [p[0] for p in ed.points] == [0.0, 0.5, 1.0]
+    with pytest.raises(IndexError):
+        ed.move_point(7, a=0.1)
+    tf = ed.transfer_function()
+    assert tf.opacity == ((-2.0, 0.0), (0.0, 0.7), (2.0, 0.9)) and tf.unit_distance == 0.5
+    assert tf.domain == (-2.0, 2.0)
+    ed.set_range(0.0, 8.0)
+    assert ed.transfer_function().opacity[1] == (4.0, 0.7)
+    assert ed.nearest_point(0.48, 0.6) == 1
+
+
+def test_editor_round_trips_a_transfer_function_and_switches_colour_maps():
+    tf = TransferFunction(color=((1.0, 0, 0, 0), (2.0, 1, 0.5, 0), (3.0, 1, 1, 1)),
+                          opacity=((1.0, 0.0), (2.5, 0.6), (3.0, 0.2)), unit_distance=0.7)
+    ed = TransferFunctionEditor.from_transfer_function(tf)
+    assert ed.colormap is None
+    back = ed.transfer_function()
+    assert back.unit_distance == tf.unit_distance
+    np.testing.assert_allclose(back.color, tf.color, atol=1e-12)
+    np.testing.assert_allclose(back.opacity, tf.opacity, atol=1e-12)
+    ed.set_colormap("hot")
+    assert ed.transfer_function().color == TransferFunction.preset("hot", (1.0, 3.0)).color
+    with pytest.raises(ValueError, match="unknown colour map"):
+        ed.set_colormap("no-such-map")
+    assert ed.colormap == "hot"
+    with pytest.raises(ValueError, match="unit_distance"):
+        ed.set_unit_distance(-1.0)
+
+
+def test_histogram_is_log_scaled_and_drawn():
+    values = np.concatenate([np.zeros(999), [1.0]])
+    logc, edges = log_histogram(values, (0.0, 1.0), bins=4)
+    np.testing.assert_allclose(logc, [3.0, 0.0, 0.0, np.log10(2.0)])
+    assert edges[0] == 0.0 and edges[-1] == 1.0
+    ed = TransferFunctionEditor((0.0, 1.0), points=[(0, 0), (0.5, 0.5), (1, 1)])
+    img = ed.image(values, size=(80, 40), selected=1)
+    assert img.shape == (40, 80, 4) and np.all(img[..., 3] == 1.0)
+    # The selected point's red square sits at t = 0.5, a = 0.5.
+    cy, cx = int(round(0.5 * 37)) + 1, int(round(0.5 * 79))
+    np.testing.assert_allclose(img[cy, cx, :3], (1.0, 0.2, 0.2), atol=1e-6)
+    # The tall first bar (log10 1000) reaches near the top; the empty middle has none.
+    assert not np.allclose(img[5, 0, :3], img[5, 40, :3])
+    png = png_bytes(img, None)
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    assert histogram_image(values, ed.transfer_function(), (0, 1), size=(20, 10)).shape == (10, 20, 4)
+
+
+# ---------------------------------------------------------------- the model
+class RecordingRenderer:
+    """Stands in for tetvr.gl.Renderer: records what it was asked to draw."""
+
+    def __init__(self):
+        self.calls = []
+
+    def render(self, mesh, camera, tf, *, size, order=None):
+        self.calls.append(dict(mesh=mesh, camera=camera, tf=tf, size=size, order=order))
+        return np.zeros((size[1], size[0], 4), np.float32)
+
+    def release(self):
+        pass
+
+
+class Clock:
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self):
+        return self.now
+
+
+def _scene(tmp_path, size=(80, 60)):
+    """A mesh file with two point fields and a cell field, and a scene for it."""
+    import meshio
+
+    mesh = synthetic.cube(2)
+    meshio.write(tmp_path / "two.vtu", meshio.Mesh(
+        mesh.points, [("tetra", mesh.tets)],
+        point_data={"temperature": mesh.scalars, "pressure": 10.0 + 5.0 * mesh.points[:, 0]},
+        cell_data={"material": [np.arange(mesh.n_tets) % 3 * 1.0]}))
+    (tmp_path / "scene.json").write_text(json.dumps({
+        "mesh": "two.vtu", "scalars": "temperature", "size": list(size),
+        "transfer_function": {"preset": "cool-to-warm", "opacity": [[0, 0.1], [1, 0.8]]}}))
+    return tetvr.load_scene(tmp_path / "scene.json")
+
+
+def test_model_progressive_frames_reuse_the_order(tmp_path, monkeypatch):
+    import tetvr.sort
+
+    sorts = []
+    real = tetvr.sort.visibility_order
+    monkeypatch.setattr(tetvr.sort, "visibility_order", lambda m, c, s: sorts.append(c) or real(m, c, s))
+    rec, clock = RecordingRenderer(), Clock()
+    model = ViewerModel(_scene(tmp_path), renderer=rec, clock=clock, preview_scale=0.5, settle_s=0.3)
+    model.final()
+    assert rec.calls[-1]["size"] == (80, 60) and len(sorts) == 1
+    first_order = rec.calls[-1]["order"]
+    np.testing.assert_array_equal(first_order, real(model.mesh, model.camera, "centroid"))
+    # Drag: two previews at half size with the first order, no sort.
+    for k in range(2):
+        clock.now += 0.05
+        model.control.drag(15, 5)
+        model.changed()
+        assert rec.calls[-1]["size"] == (40, 30) and rec.calls[-1]["order"] is first_order
+    assert len(sorts) == 1 and model.last_request.final is False
+    clock.now += 0.1
+    assert model.poll() is None
+    clock.now += 0.3
+    model.poll()
+    assert rec.calls[-1]["size"] == (80, 60) and len(sorts) == 2 and sorts[-1] is model.camera
+    assert not np.array_equal(rec.calls[-1]["order"], first_order)
+    # A transfer-function edit re-renders without sorting.
+    model.editor.move_point(0, a=0.5)
+    model.changed(camera=False)
+    clock.now += 1.0
+    model.poll()
+    assert len(sorts) == 2 and rec.calls[-1]["tf"].opacity[0][1] == 0.5
+
+
+def test_model_fields_save_and_load(tmp_path):
+    rec = RecordingRenderer()
+    model = ViewerModel(_scene(tmp_path), renderer=rec)
+    assert model.fields == ["temperature", "pressure", "material"]
+    model.set_field("pressure")
+    assert model.mesh.scalar_name == "pressure"
+    assert model.editor.scalar_range == pytest.approx(model.mesh.scalar_range)
+    assert model.editor.points[-1][1] == pytest.approx(0.8)  # the opacity points were kept
+    model.set_field("material")  # a cell field, averaged onto the points
+    with pytest.raises(KeyError, match="no field"):
+        model.set_field("nope")
+    model.set_colormap("hot")
+    model.control.azimuth(40.0)
+    (tmp_path / "sub").mkdir()
+    saved = model.save(tmp_path / "sub" / "view.json")
+    data = json.loads(saved.read_text())
+    assert data["mesh"] == "../two.vtu" and data["scalars"] == "material"
+    again = tetvr.load_scene(saved)
+    assert again.camera == model.camera
+    assert again.tf == model.editor.transfer_function()
+    other = ViewerModel(again, renderer=rec)
+    other.load(tmp_path / "scene.json")
+    assert other.field == "temperature" and other.camera == tetvr.load_scene(tmp_path / "scene.json").camera
+
+
+@pytest.mark.gl
+def test_model_refined_frame_is_the_plain_render():
+    scene = tetvr.load_scene(tetvr.demo_scene_path())
+    scene = dataclasses.replace(scene, size=(96, 72))
+    model = ViewerModel(scene)
+    try:
+        model.control.azimuth(25.0)
+        preview = model.changed()
+        assert preview.shape == (36, 48, 4)
+        final = model.final()
+        want = tetvr.render(scene.mesh, camera=model.camera, tf=scene.tf, size=(96, 72))
+        assert np.array_equal(final, want)
+    finally:
+        model.close()
+
+
+# ---------------------------------------------------------------- the widget
+def test_viewer_widget(tmp_path):
+    pytest.importorskip("ipywidgets")
+    from tetvr.widget import Viewer
+
+    rec, clock = RecordingRenderer(), Clock()
+    v = Viewer(_scene(tmp_path), renderer=rec, clock=clock, settle_s=0.2)
+    assert v.image.value[:8] == b"\x89PNG\r\n\x1a\n" and v.hist.value[:8] == b"\x89PNG\r\n\x1a\n"
+    assert v.status.value.startswith("refined 80x60")
+    # Mouse drag (as ipyevents reports it) -> previews; the wheel zooms.
+    v.handle_mouse({"type": "mousedown", "relativeX": 10, "relativeY": 10})
+    v.handle_mouse({"type": "mousemove", "relativeX": 30, "relativeY": 12, "buttons": 1})
+    assert v.status.value.startswith("preview 40x30") and rec.calls[-1]["size"] == (40, 30)
+    d0 = np.linalg.norm(np.subtract(v.model.camera.position, v.model.camera.focal_point))
+    v.handle_mouse({"type": "wheel", "deltaY": -3})
+    assert np.linalg.norm(np.subtract(v.model.camera.position, v.model.camera.focal_point)) < d0
+    v.handle_mouse({"type": "mouseup"})
+    v.refine()
+    assert v.status.value.startswith("refined") and rec.calls[-1]["size"] == (80, 60)
+    # Transfer-function controls.
+    n = len(v.model.editor.points)
+    v._add_point()
+    assert len(v.model.editor.points) == n + 1 and v.point.value == v._selected
+    v.point_a.value = 0.33
+    assert v.model.editor.points[v._selected][1] == pytest.approx(0.33)
+    v.colormap.value = "hot"
+    assert v.model.editor.colormap == "hot"
+    v.field.value = "pressure"
+    assert v.model.mesh.scalar_name == "pressure" and v.lo.value == pytest.approx(v.model.mesh.scalar_range[0])
+    v.hi.value = v.lo.value - 1.0  # an impossible range is reported, not raised
+    assert v.status.value.startswith("error")
+    # Save and load through the widget.
+    v.path.value = str(tmp_path / "saved.json")
+    v._save()
+    assert v.status.value.startswith("saved") and (tmp_path / "saved.json").is_file()
+    v.field.value = "temperature"
+    v.path.value = str(tmp_path / "saved.json")
+    v._load()
+    assert v.model.field == "pressure" and v.field.value == "pressure" and v.colormap.value == "(scene)"
+    v.close()
