@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from typing import Any
 
 import numpy as np
@@ -30,6 +29,7 @@ from ..transfer import TransferFunction
 from ..volume import Volume
 from .context import create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
+from .util import Clock, check_size, set_uniforms
 
 __all__ = ["Raycaster", "RaycastStats", "MODES"]
 
@@ -339,8 +339,8 @@ class Raycaster:
         if not isinstance(tf, TransferFunction):
             raise TypeError(f"tf must be a TransferFunction, got {type(tf).__name__}")
         s = settings or self.settings
-        width, height = _check_size(size, self.ctx)
-        clock = _Clock(self.ctx, self.profile)
+        width, height = check_size(size, self.ctx)
+        clock = Clock(self.ctx, self.profile)
 
         gpu = self._use_volume(volume)
         use_limits = self._use_limits(t_start, t_end, (width, height))
@@ -377,7 +377,7 @@ class Raycaster:
         clip_lo, clip_hi = (np.asarray(s.clip_box[0]) - centre, np.asarray(s.clip_box[1]) - centre) \
             if s.clip_box is not None else (np.zeros(3), np.zeros(3))
         prog = self._program(s.mode, s.interpolation)
-        _set(prog,
+        set_uniforms(prog,
              u_inv_viewport=(1.0 / width, 1.0 / height), u_perspective=0 if camera.parallel_projection else 1,
              u_k=(k * aspect, k), u_eye_to_index=eye_to_index, u_eye_to_local=eye_to_local,
              u_box_hi=tuple(float(n - 1) for n in gpu.dims), u_clip_range=camera.clipping_range,
@@ -423,41 +423,3 @@ def _classification_range(volume: Volume, tf: TransferFunction) -> tuple[float, 
         pad = max(abs(lo) * 1e-6, 1e-12)
         lo, hi = lo - pad, hi + pad
     return lo, hi
-
-
-def _check_size(size: tuple[int, int], ctx: Any) -> tuple[int, int]:
-    try:
-        width, height = (int(v) for v in size)
-    except (TypeError, ValueError):
-        raise ValueError(f"size must be (width, height), got {size!r}") from None
-    if (width, height) != tuple(size):
-        raise ValueError(f"size must be integers, got {size!r}")
-    limit = int(min(ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384), ctx.info.get("GL_MAX_VIEWPORT_DIMS", (16384,))[0]))
-    if not (1 <= width <= limit and 1 <= height <= limit):
-        raise ValueError(f"image size {size!r} is outside 1..{limit} pixels per side (the GL limit here)")
-    return width, height
-
-
-def _set(prog: Any, **uniforms: Any) -> None:
-    for name, value in uniforms.items():
-        if name not in prog:
-            continue  # optimised away by the compiler
-        arr = np.asarray(value) if isinstance(value, np.ndarray) else None
-        if arr is not None and arr.ndim == 2:
-            prog[name].write(arr.T.astype(np.float32).tobytes())  # GLSL is column-major
-        else:
-            prog[name].value = value
-
-
-class _Clock:
-    def __init__(self, ctx: Any, sync: bool) -> None:
-        self.ctx, self.sync = ctx, sync
-        self.laps: dict[str, float] = {}
-        self.t = time.perf_counter()
-
-    def lap(self, name: str) -> None:
-        if self.sync:
-            self.ctx.finish()
-        now = time.perf_counter()
-        self.laps[name] = self.laps.get(name, 0.0) + now - self.t
-        self.t = now

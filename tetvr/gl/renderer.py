@@ -10,7 +10,6 @@ expands the fans into triangles (``tet.vert``) whose fragments look up the table
 from __future__ import annotations
 
 import dataclasses
-import time
 from typing import Any, Iterator
 
 import numpy as np
@@ -24,6 +23,7 @@ from ..sort import sort_with_stats
 from ..transfer import TransferFunction
 from .context import create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
+from .util import Clock, check_size, set_uniforms
 
 __all__ = ["Renderer", "FrameStats"]
 
@@ -94,7 +94,7 @@ class Renderer:
         self._table: PreintegrationTable | None = None
         self._table_tex: Any = None
         self._targets: dict[tuple[tuple[int, int], int, str], Any] = {}
-        self._clock = _Clock(self.ctx, False)
+        self._clock = Clock(self.ctx, False)
         self._vaos: dict[int, Any] = {}
         self.last_stats = FrameStats()
         self._released = False
@@ -264,13 +264,13 @@ class Renderer:
     def _classify(self, n_tets: int, uniforms: dict[str, Any]) -> None:
         """Run classify.comp over the tets in the tets buffer."""
         classify = self._program("classify")
-        _set(classify, u_count=n_tets, **uniforms)
+        set_uniforms(classify, u_count=n_tets, **uniforms)
         self._mesh_buffers[0].bind_to_storage_buffer(0)
         self._mesh_buffers[1].bind_to_storage_buffer(1)
         self._fans.bind_to_storage_buffer(2)
         groups = (n_tets + _GROUP - 1) // _GROUP
         for first in range(0, groups, _MAX_GROUPS):
-            _set(classify, u_offset=first * _GROUP)
+            set_uniforms(classify, u_offset=first * _GROUP)
             classify.run(min(_MAX_GROUPS, groups - first))
         self._clock.lap("classify")
 
@@ -309,8 +309,8 @@ class Renderer:
     def _check(self, size: tuple[int, int]) -> tuple[int, int]:
         if self._released:
             raise RuntimeError("this Renderer has been released")
-        self._clock = _Clock(self.ctx, self.profile)
-        return _check_size(size, self.ctx)
+        self._clock = Clock(self.ctx, self.profile)
+        return check_size(size, self.ctx)
 
     def render(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, *, size: tuple[int, int] = (512, 512),
                order: NDArray[np.integer[Any]] | None = None, shader: str = "tet") -> NDArray[np.float32]:
@@ -357,7 +357,7 @@ class Renderer:
         if shader == "tet":
             defines["NEAR_CROSSING"] = int(_crosses_near_plane(mesh, camera))
         prog = self._program(shader, **defines)
-        _set(prog, u_scalar_range=table.scalar_range, u_d_min=table.d_min,
+        set_uniforms(prog, u_scalar_range=table.scalar_range, u_d_min=table.d_min,
              u_inv_log_base=1.0 / np.log(table.log_base), u_alpha_scale=table.alpha_scale,
              u_table_size=(table.n_bins, table.n_bins, table.n_slices + 1), u_table=0, **uniforms)
         fb_dtype = "f4" if self.settings.framebuffer == "float32" else "f1"
@@ -393,7 +393,7 @@ class Renderer:
         size = self._check(size)
         uniforms = self._view_uniforms(mesh, camera, size)
         prog = self._program("depth", PERSPECTIVE_CORRECT=int(self.settings.perspective_correct))
-        _set(prog, **uniforms)
+        set_uniforms(prog, **uniforms)
         fbo = self._use_target(size, 2)
         fbo.use()
         fbo.clear(3e38, 3e38, 0.0, 0.0)
@@ -411,40 +411,3 @@ def _crosses_near_plane(mesh: TetMesh, camera: Camera) -> bool:
     """Whether any point lies nearer than the near plane (then some tet may cross it)."""
     depth = (mesh.points - np.asarray(camera.position)) @ np.asarray(camera.direction)
     return bool(depth.min() < camera.clipping_range[0])
-
-
-def _check_size(size: tuple[int, int], ctx: Any) -> tuple[int, int]:
-    try:
-        width, height = (int(v) for v in size)
-    except (TypeError, ValueError):
-        raise ValueError(f"size must be (width, height), got {size!r}") from None
-    if (width, height) != tuple(size):
-        raise ValueError(f"size must be integers, got {size!r}")
-    limit = int(min(ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384), ctx.info.get("GL_MAX_VIEWPORT_DIMS", (16384,))[0]))
-    if not (1 <= width <= limit and 1 <= height <= limit):
-        raise ValueError(f"image size {size!r} is outside 1..{limit} pixels per side (the GL limit here)")
-    return width, height
-
-
-def _set(prog: Any, **uniforms: Any) -> None:
-    for name, value in uniforms.items():
-        if name not in prog:
-            continue  # optimised away by the compiler
-        if isinstance(value, np.ndarray) and value.shape == (4, 4):
-            prog[name].write(value.T.astype(np.float32).tobytes())  # GLSL is column-major
-        else:
-            prog[name].value = value
-
-
-class _Clock:
-    def __init__(self, ctx: Any, sync: bool) -> None:
-        self.ctx, self.sync = ctx, sync
-        self.laps: dict[str, float] = {}
-        self.t = time.perf_counter()
-
-    def lap(self, name: str) -> None:
-        if self.sync:
-            self.ctx.finish()
-        now = time.perf_counter()
-        self.laps[name] = self.laps.get(name, 0.0) + now - self.t
-        self.t = now

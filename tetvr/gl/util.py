@@ -1,0 +1,53 @@
+"""Small GL helpers shared by the renderers: size checks, uniforms, stage clocks."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+__all__ = ["check_size", "set_uniforms", "Clock"]
+
+
+def check_size(size: tuple[int, int], ctx: Any) -> tuple[int, int]:
+    """(width, height) as ints, within 1 .. the GL's texture and viewport limit."""
+    try:
+        width, height = (int(v) for v in size)
+    except (TypeError, ValueError):
+        raise ValueError(f"size must be (width, height), got {size!r}") from None
+    if (width, height) != tuple(size):
+        raise ValueError(f"size must be integers, got {size!r}")
+    limit = int(min(ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384), ctx.info.get("GL_MAX_VIEWPORT_DIMS", (16384,))[0]))
+    if not (1 <= width <= limit and 1 <= height <= limit):
+        raise ValueError(f"image size {size!r} is outside 1..{limit} pixels per side (the GL limit here)")
+    return width, height
+
+
+def set_uniforms(prog: Any, **uniforms: Any) -> None:
+    """Set the uniforms a program uses; 2D arrays are written as column-major matrices."""
+    for name, value in uniforms.items():
+        if name not in prog:
+            continue  # optimised away by the compiler
+        arr = np.asarray(value) if isinstance(value, np.ndarray) else None
+        if arr is not None and arr.ndim == 2:
+            prog[name].write(arr.T.astype(np.float32).tobytes())  # GLSL is column-major
+        else:
+            prog[name].value = value
+
+
+class Clock:
+    """Stage timer: ``lap(name)`` adds the time since the last lap (after glFinish if
+    ``sync``) to ``laps[name]``."""
+
+    def __init__(self, ctx: Any, sync: bool) -> None:
+        self.ctx, self.sync = ctx, sync
+        self.laps: dict[str, float] = {}
+        self.t = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        if self.sync:
+            self.ctx.finish()
+        now = time.perf_counter()
+        self.laps[name] = self.laps.get(name, 0.0) + now - self.t
+        self.t = now
