@@ -218,7 +218,6 @@ def build_table(
 
     u = tf.unit_distance
     nodes = np.linspace(lo, hi, n_bins)
-    ds = (hi - lo) / (n_bins - 1)
     color, opacity = tf.evaluate(nodes)
     if optics not in OPTICS:
         raise ValueError(f"optics must be one of {OPTICS}, got {optics!r}")

@@ -59,7 +59,7 @@ from numpy.typing import NDArray
 
 from .camera import Camera
 from .mesh import TetMesh
-from .optics import _SUB_THETA, MAX_OPACITY, OPTICS, integrate_linear_pieces, integrate_pieces, piece_optical_depth, vtk_segments
+from .optics import _SUB_THETA, OPTICS, integrate_linear_pieces, integrate_pieces, piece_optical_depth, vtk_segments
 from .transfer import TransferFunction
 
 __all__ = [
