@@ -6,10 +6,11 @@ exists, bluntfin and combustor, field "Density") this renders a 512x512 perspect
 
 * tetvr's GPU renderer, default settings (``Renderer``);
 * tetvr in VTK parity (:data:`tetvr.vtkcompare.PARITY_SETTINGS`: VTK's convention);
-* VTK's ``vtkProjectedTetrahedraMapper`` in an offscreen EGL window
-  (:class:`tetvr.vtkcompare.VTKRenderer`),
+* VTK's ``vtkProjectedTetrahedraMapper`` in an offscreen EGL window, in a child process
+  (:class:`tetvr.vtkcompare.VTKProcess`: VTK's EGL window and moderngl's context cannot
+  share a process),
 
-all on the same OpenGL (Mesa llvmpipe here), in one process. The three renderers stay
+all on the same OpenGL (Mesa llvmpipe here). The three renderers stay
 alive for the whole mesh and take frames **in turn** (tetvr, parity, VTK, tetvr, ...),
 so background load falls on all of them alike. Every frame turns the camera by
 ``--step`` degrees about its view-up axis, so each one is a view change: VTK re-sorts and
@@ -245,7 +246,7 @@ def plot(res: dict[str, Any], path: Path) -> None:
     meshes = sorted(res["meshes"], key=lambda m: m["n_tets"])
     if not meshes:
         return
-    names = [f"{m['name']}\n{m['n_tets'] / 1e3:.0f}k" for m in meshes]
+    names = [f"{m['name'].split(' ')[0]}\n{m['n_tets'] / 1e3:.0f}k" for m in meshes]
     x = np.arange(len(meshes))
     fig, ax = plt.subplots(1, 3, figsize=(17, 5.2))
     w = 0.27
@@ -274,10 +275,100 @@ def plot(res: dict[str, Any], path: Path) -> None:
         a.set_xticks(x)
         a.set_xticklabels(names, fontsize=8)
     gl = res.get("gl_renderer", "")
-    fig.suptitle(f"tetvr vs VTK {res.get('vtk_version', '?')} projected tetrahedra, same process, {gl}", fontsize=10)
+    fig.suptitle(f"tetvr vs VTK {res.get('vtk_version', '?')} projected tetrahedra, same machine and GL ({gl}), "
+                 "frames taken in turn", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+# ---------------------------------------------------------------- where VTK's error comes from
+def _anatomy_tfs(mesh: TetMesh) -> dict[str, Any]:
+    """Three transfer functions: linear in the scalar (VTK's colour-at-vertex mapping is then
+    exact), the default (viridis, 9 control points, constant opacity) and a spike."""
+    lo, hi = mesh.scalar_range
+    diag = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
+    q30, q60 = ((q - lo) / (hi - lo) for q in np.quantile(mesh.scalars, [0.3, 0.6]))
+    return {
+        "linear": tetvr.TransferFunction(color=((lo, 0.1, 0.2, 0.9), (hi, 1.0, 0.8, 0.1)),
+                                         opacity=((lo, 0.2), (hi, 0.9)), unit_distance=diag / 20),
+        "default": default_transfer_function(mesh, opacity=OPACITY),
+        "spike": tetvr.TransferFunction.preset(
+            "cool-to-warm", (lo, hi), unit_distance=diag / 20,
+            opacity=[(0.0, 0.02), (q30 - 0.03, 0.05), (q30, 0.9), (q30 + 0.03, 0.05), (q60, 0.3), (1.0, 0.9)]),
+    }
+
+
+def _class2_bug() -> dict[str, Any]:
+    """One tet seen so that two opposite edges cross off their midpoints (Shirley-Tuchman
+    class 2), opacity varying along the second: VTK's mapper interpolates that edge's
+    opacity with the first edge's parameter (alpha for beta), so its thick vertex is off."""
+    pts = np.array([[-1, 0, 0.5], [1, 0, 0.5], [0, -0.3, -0.5], [0, 1.2, -0.5]], float)
+    tf = tetvr.TransferFunction(color=((0, 1, 1, 1), (1, 1, 1, 1)), opacity=((0, 0.0), (1, 1.0)), unit_distance=1.0)
+    out = {}
+    for scalars in ([0, 0, 0, 1], [0, 0, 1, 0], [0, 0, 1, 1]):
+        mesh = TetMesh.from_arrays(pts, [[0, 1, 2, 3]], scalars)
+        cam = Camera.fit(mesh, direction=(0.001, 0.002, -1.0), parallel=True)
+        with VTKProcess(mesh, tf, size=(64, 64)) as r:
+            vtk = r.render(cam)
+        ref = render_reference(mesh, cam, tf, (64, 64), optics="vtk")
+        with tetvr.Renderer(PARITY_SETTINGS) as t:
+            ours = quantize8(t.render(mesh, cam, tf, size=(64, 64)))
+        out[str(scalars)] = {"centre_alpha": {"vtk_pt": float(vtk[32, 32, 3]), "reference_vtk": float(ref[32, 32, 3]),
+                                              "tetvr_parity": float(ours[32, 32, 3])},
+                             "psnr_vs_reference_vtk": {"vtk_pt": psnr(vtk, ref), "tetvr_parity": psnr(ours, ref)}}
+    return out
+
+
+def anatomy(name: str, mesh: TetMesh, size: tuple[int, int], out: Path) -> dict[str, Any]:
+    """Split the error of VTK's projected tetrahedra into its causes, by PSNR between
+    tetvr's references in each convention, VTK's image and tetvr's parity image."""
+    rec: dict[str, Any] = {"mesh": name, "n_tets": mesh.n_tets, "size": list(size), "cases": {}}
+    for tf_name, tf in _anatomy_tfs(mesh).items():
+        for proj in ("perspective", "parallel"):
+            cam = Camera.fit(mesh, parallel=proj == "parallel")
+            refs = {o: render_reference(mesh, cam, tf, size, optics=o) for o in ("exact", "linear", "vtk")}
+            with VTKProcess(mesh, tf, size=size) as r:
+                vtk = r.render(cam)
+            with tetvr.Renderer() as t:
+                ours = t.render(mesh, cam, tf, size=size)
+            with tetvr.Renderer(PARITY_SETTINGS) as t:
+                parity = quantize8(t.render(mesh, cam, tf, size=size))
+            cov = refs["exact"][..., 3] > 1 / 255
+            case = {
+                "convention: exact vs linear reference": psnr(refs["exact"], refs["linear"]),
+                "colour averaging: linear vs vtk reference": psnr(refs["linear"], refs["vtk"]),
+                "VTK PT vs reference in its own convention": psnr(vtk, refs["vtk"]),
+                "VTK PT vs tetvr parity": psnr(vtk, parity),
+                "tetvr parity vs vtk reference": psnr(parity, refs["vtk"]),
+                "VTK PT vs exact reference": psnr(vtk, refs["exact"]),
+                "tetvr vs exact reference": psnr(ours, refs["exact"]),
+                "mean alpha over covered pixels": {"exact": float(refs["exact"][..., 3][cov].mean()),
+                                                   "vtk_convention": float(refs["vtk"][..., 3][cov].mean()),
+                                                   "vtk_pt": float(vtk[..., 3][cov].mean())},
+            }
+            rec["cases"][f"{tf_name}, {proj}"] = case
+            print(f"  {tf_name:8s} {proj:11s} " + "  ".join(
+                f"{v:5.1f}" for v in case.values() if isinstance(v, float)), flush=True)
+            if proj == "perspective":
+                _anatomy_picture(refs, vtk, ours, out / f"vs_vtk_anatomy_{tf_name}.png")
+    rec["class2_opacity_bug"] = _class2_bug()
+    return rec
+
+
+def _anatomy_picture(refs: dict[str, np.ndarray], vtk: np.ndarray, ours: np.ndarray, path: Path) -> None:
+    """Top: exact reference, reference in VTK's convention, VTK PT, tetvr. Bottom, x10:
+    convention + averaging (vtk ref - exact), VTK's own error (PT - vtk ref), VTK's total
+    error (PT - exact), tetvr's error (tetvr - exact)."""
+    def diff(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        d = np.zeros_like(a)
+        d[..., :3] = np.clip(np.abs(a[..., :3] - b[..., :3]) * 10.0, 0, 1)
+        d[..., 3] = 1
+        return d
+
+    ex, vr = refs["exact"], refs["vtk"]
+    tiles = [ex, vr, vtk, ours, diff(vr, ex), diff(vtk, vr), diff(vtk, ex), diff(ours, ex)]
+    write_png(tile_images(tiles, cols=4), path, background=(0, 0, 0))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -289,11 +380,30 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--step", type=float, default=3.0, help="degrees the camera turns per frame")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
+    ap.add_argument("--anatomy", action="store_true",
+                    help="instead: split VTK's error into its causes (bluntfin, or cube(20) without the data), "
+                         "at 256x256; writes vs_vtk_anatomy.json and vs_vtk_anatomy_<tf>.png")
     args = ap.parse_args(argv)
     ok, why = vtk_status()
     if not ok:
         print(f"VTK unavailable: {why}")
         return 2
+    if args.anatomy:
+        args.out.mkdir(parents=True, exist_ok=True)
+        path = args.data / "bluntfin_tets.vtu"
+        if path.exists():
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                name, mesh = "bluntfin (Density)", tetvr.read(path, "Density")
+        else:
+            name, mesh = "cube(20)", synthetic.cube(20)
+        print(f"{name}: PSNR (dB) of: convention | colour averaging | VTK PT vs own-convention reference | "
+              "VTK PT vs tetvr parity | tetvr parity vs reference | VTK PT vs exact | tetvr vs exact")
+        rec = anatomy(name, mesh, (256, 256), args.out)
+        rec.update(vtk_status=why, date=_dt.datetime.now().isoformat(timespec="seconds"))
+        _write_json(args.out / "vs_vtk_anatomy.json", rec)
+        print(json.dumps(rec["class2_opacity_bug"], indent=1))
+        return 0
     repeats = args.repeats or (3 if args.quick else 5)
     size = (args.size, args.size)
     ref_size = (args.ref_size or args.size,) * 2

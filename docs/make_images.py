@@ -3,6 +3,7 @@
     pip install -e ".[bench]"             # matplotlib, for the labelled panels
     python docs/make_images.py            # everything, ~1 minute on llvmpipe
     python docs/make_images.py methods    # one group: quickstart, methods, fusion, limits, interactive
+    python docs/make_images.py tables     # print docs/limits.md's table from bench/results/
 
 Every picture under docs/images/guide/ comes from this script; docs/images/demo.png from
 `tetvr demo -o docs/images/demo.png`; docs/images/fusion/ from
@@ -55,7 +56,7 @@ def panels(images, titles, path, *, background=(0, 0, 0), suptitle=None, cols=No
         fig.suptitle(suptitle, fontsize=10)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.05)
     plt.close(fig)
     print("wrote", path.relative_to(ROOT))
 
@@ -203,7 +204,7 @@ def limits(size=(96, 96)):
             k = _nice(0.8 / max(float(np.abs(img[..., :3] - ref[..., :3]).max()), 1e-6))
             gpu.append(img)
             diffs.append(_diff(img, ref, k))
-            titles.append(f"{name}\n{'exact' if np.isinf(p) else f'{p:.1f} dB'}")
+            titles.append(f"{name}\n{'exact (empty image)' if p > 150 else f'{p:.1f} dB'}")
             dtitles.append(f"{name}\n|GPU - ref| x {k}")
     panels(gpu, titles, OUT / "stability_cases.png", cols=6, size_in=1.7, background=(1, 1, 1),
            suptitle="the stability cases, default settings, 96x96 (PSNR against the reference)")
@@ -226,7 +227,33 @@ def interactive():
            background=(0.08, 0.08, 0.1), suptitle="tetvr animate demo.json --orbit 6 (frames 0..5)")
 
 
-GROUPS = {"quickstart": quickstart, "methods": methods, "fusion": fusion, "limits": limits, "interactive": interactive}
+def tables():
+    """Print the Markdown tables of docs/limits.md from bench/results/speed_accuracy.json."""
+    import warnings as _w
+
+    path = ROOT / "bench" / "results" / "speed_accuracy.json"
+    if not path.is_file():
+        print(f"no {path}: run python bench/speed_accuracy.py first")
+        return
+    data = json.loads(path.read_text())
+    cols = ["default", "screen-linear interpolation", "premultiplied table", "uint8 framebuffer", "N=64",
+            "sort=mpvonc", "sort=none"]
+    print(f"<!-- from bench/results/speed_accuracy.json, {data['created']}, {data['size'][0]}x{data['size'][1]} px -->")
+    print("| case | what | " + " | ".join(cols) + " |")
+    print("|---|---|" + "---:|" * len(cols))
+    with _w.catch_warnings():
+        _w.simplefilter("ignore")
+        for name, rec in sorted(data["stability"].items()):
+            what = case(name).what if name in CASES else ""
+            cells = []
+            for c in cols:
+                p = rec.get(c, {}).get("psnr")
+                cells.append("—" if p is None else ("exact" if p >= 150 else f"{p:.1f}"))
+            print(f"| `{name}` | {what} | " + " | ".join(cells) + " |")
+
+
+GROUPS = {"quickstart": quickstart, "methods": methods, "fusion": fusion, "limits": limits, "interactive": interactive,
+          "tables": tables}
 
 
 def main(argv=None) -> int:

@@ -324,3 +324,16 @@ def test_viewer_widget(tmp_path):
     v._load()
     assert v.model.field == "pressure" and v.field.value == "pressure" and v.colormap.value == "(scene)"
     v.close()
+
+
+def test_view_without_a_display_says_so(tmp_path, monkeypatch, capsys):
+    from tetvr.cli import main
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr("tetvr.widget.os.name", "posix")
+    monkeypatch.setattr("tetvr.widget.os.uname", lambda: type("U", (), {"sysname": "Linux"})())
+    _scene(tmp_path)
+    assert main(["view", str(tmp_path / "scene.json")]) == 3
+    err = capsys.readouterr().err
+    assert "no display" in err and "DISPLAY" in err

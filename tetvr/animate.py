@@ -199,7 +199,7 @@ def _write_video(images: Iterable[ArrayLike], out: Path, background: Sequence[fl
     with imageio.get_writer(out, **kw) as writer:
         for image in images:
             rgba = to_rgba8(image, bg)
-            writer.append_data(rgba if out.suffix.lower() == ".gif" else rgba[..., :3])
+            writer.append_data(rgba if out.suffix.lower() == ".gif" else rgba[..., :3])  # type: ignore[attr-defined]
     return out
 
 

@@ -213,6 +213,7 @@ def from_matplotlib(
     t = np.linspace(0.0, 1.0, n)
     rgba = np.asarray(cmap(t), dtype=np.float64)
     color = np.column_stack([lo + (hi - lo) * t, np.clip(rgba[:, :3], 0.0, 1.0)])
+    op: tuple[tuple[float, float], ...]
     if np.isscalar(opacity):
         op = ((lo, float(opacity)), (hi, float(opacity)))  # type: ignore[arg-type]
     else:

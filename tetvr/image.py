@@ -10,7 +10,7 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["write_png", "to_rgba8", "composite_over", "psnr", "rmse"]
+__all__ = ["write_png", "png_bytes", "to_rgba8", "composite_over", "psnr", "rmse"]
 
 
 def composite_over(image: ArrayLike, background: Sequence[float] | None) -> NDArray[np.float64]:
@@ -47,6 +47,12 @@ def write_png(image: ArrayLike, path: str | os.PathLike[str], *, background: Seq
 
     ``background`` is composited under the image; ``None`` writes a translucent RGBA PNG.
     """
+    with open(path, "wb") as f:
+        f.write(png_bytes(image, background=background))
+
+
+def png_bytes(image: ArrayLike, background: Sequence[float] | None = (1.0, 1.0, 1.0), *, level: int = 6) -> bytes:
+    """The PNG file of a premultiplied float RGBA image, as bytes (see :func:`write_png`)."""
     rgba = to_rgba8(image, background)
     h, w, _ = rgba.shape
     if h < 1 or w < 1:
@@ -57,9 +63,8 @@ def write_png(image: ArrayLike, path: str | os.PathLike[str], *, background: Seq
         return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
 
     png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0))
-    png += chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
-    with open(path, "wb") as f:
-        f.write(png)
+    png += chunk(b"IDAT", zlib.compress(raw, level)) + chunk(b"IEND", b"")
+    return png
 
 
 def rmse(a: ArrayLike, b: ArrayLike) -> float:

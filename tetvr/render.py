@@ -18,13 +18,17 @@ __all__ = ["render", "default_transfer_function"]
 # classification). Measured on one tet: exact for extents 1e-15 .. 1e19, blank or wrong
 # outside; these bounds keep a margin.
 GPU_EXTENT_RANGE = (1e-13, 1e18)
+# Scalars (of the field and the transfer function) go to the GPU as float32 too.
+GPU_SCALAR_LIMIT = 1e37
 
 
 def default_transfer_function(mesh: TetMesh, *, preset: str = "viridis", opacity: float = 0.5) -> TransferFunction:
     """A preset over the mesh's scalar range; unit distance 1/20 of the mesh's diagonal."""
     lo, hi = mesh.scalar_range
     if hi <= lo:
-        hi = lo + max(abs(lo), 1.0) * 1e-6
+        # A constant field: a small interval above it, wide enough that the GPU's float32
+        # scalars (~6e-8 relative rounding) stay near its start; 1e-6 was only ~15 ulps.
+        hi = lo + max(abs(lo), 1.0) * 1e-3
     diag = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
     return TransferFunction.preset(preset, (lo, hi), opacity=opacity, unit_distance=max(diag / 20.0, 1e-30))
 
@@ -76,6 +80,12 @@ def render(
             f"the mesh's extent ({extent:.3g}, its bounding-box diagonal) is outside "
             f"{GPU_EXTENT_RANGE[0]:g} .. {GPU_EXTENT_RANGE[1]:g}, where the GPU's float32 arithmetic is exact; "
             "rescale the mesh (with the camera and unit_distance) or use method='reference'"
+        )
+    biggest = max(abs(v) for v in (*mesh.scalar_range, *tf.domain))
+    if biggest > GPU_SCALAR_LIMIT:
+        raise ValueError(
+            f"scalar values up to {biggest:.3g} (field or transfer function) are beyond the GPU's float32 "
+            f"(limit {GPU_SCALAR_LIMIT:g}); rescale the field and transfer function or use method='reference'"
         )
     from .gl.renderer import Renderer
 

@@ -19,15 +19,15 @@ __all__ = ["TransferFunction", "PRESETS"]
 
 # Colour presets sampled on [0, 1]: (position, r, g, b).
 PRESETS: dict[str, tuple[tuple[float, float, float, float], ...]] = {
-    "viridis": (
+    "viridis": (  # matplotlib's viridis at k/8
         (0.0, 0.267004, 0.004874, 0.329415),
-        (0.125, 0.282623, 0.140926, 0.457517),
-        (0.25, 0.253935, 0.265254, 0.529983),
-        (0.375, 0.206756, 0.371758, 0.553117),
-        (0.5, 0.163625, 0.471133, 0.558148),
-        (0.625, 0.128729, 0.563265, 0.551229),
-        (0.75, 0.134692, 0.658636, 0.517649),
-        (0.875, 0.327796, 0.772152, 0.406420),
+        (0.125, 0.278826, 0.175490, 0.483397),
+        (0.25, 0.229739, 0.322361, 0.545706),
+        (0.375, 0.172719, 0.448791, 0.557885),
+        (0.5, 0.127568, 0.566949, 0.550556),
+        (0.625, 0.157851, 0.683765, 0.501686),
+        (0.75, 0.369214, 0.788888, 0.382914),
+        (0.875, 0.678489, 0.863742, 0.189503),
         (1.0, 0.993248, 0.906157, 0.143936),
     ),
     "cool-to-warm": (
@@ -105,7 +105,7 @@ class TransferFunction:
             u = float(self.unit_distance)
         except (TypeError, ValueError):
             raise ValueError(f"unit_distance must be a positive finite number, got {self.unit_distance!r}") from None
-        if isinstance(self.unit_distance, (bool, np.bool_)) or not np.isfinite(u) or u <= 0:
+        if isinstance(self.unit_distance, (bool, np.bool_, str, bytes)) or not np.isfinite(u) or u <= 0:
             raise ValueError(f"unit_distance must be a positive finite number, got {self.unit_distance!r}")
         object.__setattr__(self, "unit_distance", u)
 

@@ -313,6 +313,10 @@ class VTKProcess:
     window's creation on (it does not count starting Python and importing VTK).
     :attr:`info` holds the VTK version, window class, mapper class and GL renderer.
 
+    The child is a fresh interpreter (``python -c``, not ``multiprocessing``, so scripts
+    need no ``if __name__ == "__main__"`` guard) that talks over two pipes (POSIX only;
+    VTK renders headless through EGL on Linux anyway).
+
     Examples
     --------
     >>> with VTKProcess(mesh, tf, mapper="pt", size=(256, 256)) as r:  # doctest: +SKIP
@@ -322,7 +326,9 @@ class VTKProcess:
 
     def __init__(self, mesh: TetMesh, tf: TransferFunction, *, mapper: str = "pt",
                  size: tuple[int, int] = (512, 512), timeout: float = 600.0) -> None:
-        import multiprocessing
+        import subprocess
+        import sys
+        from multiprocessing.connection import Connection
 
         if mapper not in MAPPERS:
             raise ValueError(f"mapper must be one of {sorted(MAPPERS)}, got {mapper!r}")
@@ -331,25 +337,35 @@ class VTKProcess:
         self.first_seconds = float("nan")
         self.info: dict[str, Any] = {}
         self._first = True
-        # "spawn": a fresh interpreter that has never touched this process's GL state.
-        ctx = multiprocessing.get_context("spawn")
-        self._conn, child = ctx.Pipe()
+        self._proc: Any = None
+        down_r, down_w = os.pipe()  # parent -> child
+        up_r, up_w = os.pipe()  # child -> parent
+        env = dict(os.environ)
+        # The child imports this very tetvr, installed or not (benchmarks put the checkout on sys.path).
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(Path(__file__).resolve().parents[1]),
+                                                         env.get("PYTHONPATH")) if p)
+        code = "import sys; from tetvr.vtkcompare import _serve; _serve(int(sys.argv[1]), int(sys.argv[2]))"
+        try:
+            self._proc = subprocess.Popen([sys.executable, "-c", code, str(down_r), str(up_w)],
+                                          pass_fds=(down_r, up_w), env=env)
+        finally:
+            os.close(down_r)
+            os.close(up_w)
+        self._out = Connection(down_w, readable=False)
+        self._in = Connection(up_r, writable=False)
         grid = {"points": np.asarray(mesh.points), "tets": np.asarray(mesh.tets),
                 "scalars": np.asarray(mesh.scalars), "scalar_name": mesh.scalar_name}
-        self._proc: Any = ctx.Process(target=_vtk_worker, args=(child, grid, tf.to_dict(), mapper,
-                                                               tuple(int(v) for v in size)), daemon=True)
-        self._proc.start()
-        child.close()
+        self._out.send((grid, tf.to_dict(), mapper, tuple(int(v) for v in size)))
         self.info = self._reply()
 
     def _reply(self) -> Any:
-        if not self._conn.poll(self.timeout):
-            self.release()
-            raise RuntimeError(f"the VTK process did not answer within {self.timeout:.0f} s")
         try:
-            kind, payload = self._conn.recv()
-        except EOFError:
-            code = self._proc.exitcode
+            if not self._in.poll(self.timeout):
+                self.release()
+                raise RuntimeError(f"the VTK process did not answer within {self.timeout:.0f} s")
+            kind, payload = self._in.recv()
+        except (EOFError, OSError):
+            code = self._proc.poll() if self._proc is not None else None
             self.release()
             raise RuntimeError(f"the VTK process died (exit code {code})") from None
         if kind == "error":
@@ -367,7 +383,7 @@ class VTKProcess:
         """Render one frame in the child: (height, width, 4) float32 premultiplied RGBA."""
         if self._proc is None:
             raise RuntimeError("this VTKProcess has been released")
-        self._conn.send(camera.to_dict())
+        self._out.send(camera.to_dict())
         image, seconds, info = self._reply()
         self.info.update(info)
         self.last_seconds = seconds
@@ -377,50 +393,53 @@ class VTKProcess:
 
     def release(self) -> None:
         """Stop the child process. Safe to call twice."""
-        proc, self._proc = getattr(self, "_proc", None), None
+        proc, self._proc = self._proc, None
         if proc is None:
             return
         try:
-            self._conn.send(None)
+            self._out.send(None)
         except (OSError, ValueError):
             pass
-        proc.join(timeout=10)
-        if proc.is_alive():
-            proc.terminate()
-            proc.join(timeout=5)
-        self._conn.close()
+        try:
+            proc.wait(timeout=10)
+        except Exception:
+            proc.kill()
+            proc.wait(timeout=5)
+        self._out.close()
+        self._in.close()
 
 
-def _vtk_worker(conn: Any, grid: dict[str, Any], tf_dict: dict[str, Any], mapper: str,
-                size: tuple[int, int]) -> None:
-    """The child of :class:`VTKProcess`: renders cameras it is sent until it gets None."""
+def _serve(in_fd: int, out_fd: int) -> None:
+    """The child of :class:`VTKProcess`: renders the cameras it is sent until it gets None."""
     import types
+    from multiprocessing.connection import Connection
 
+    inbox, outbox = Connection(in_fd, writable=False), Connection(out_fd, readable=False)
     try:
+        grid, tf_dict, mapper, size = inbox.recv()
         t0 = time.perf_counter()
-        renderer = VTKRenderer(types.SimpleNamespace(**grid, n_tets=len(grid["tets"])),  # type: ignore[arg-type]
-                               TransferFunction.from_dict(tf_dict), mapper=mapper, size=size)
+        mesh = types.SimpleNamespace(**grid, n_tets=len(grid["tets"]))
+        renderer = VTKRenderer(mesh, TransferFunction.from_dict(tf_dict), mapper=mapper, size=size)  # type: ignore[arg-type]
         setup = time.perf_counter() - t0
     except Exception as exc:
-        conn.send(("error", str(exc) if isinstance(exc, VTKUnavailableError) else f"{type(exc).__name__}: {exc}"))
+        outbox.send(("error", str(exc) if isinstance(exc, VTKUnavailableError) else f"{type(exc).__name__}: {exc}"))
         return
     try:
-        info = {"version": renderer._mods.version, "window": renderer.window_class,
-                "mapper_class": renderer.mapper_class, "gl_renderer": "", "setup_seconds": setup}
-        conn.send(("ok", info))
+        outbox.send(("ok", {"version": renderer._mods.version, "window": renderer.window_class,
+                            "mapper_class": renderer.mapper_class, "gl_renderer": "", "setup_seconds": setup}))
         while True:
-            msg = conn.recv()
+            msg = inbox.recv()
             if msg is None:
                 break
             t0 = time.perf_counter()
             try:
                 image = renderer.render(Camera.from_dict(msg))
             except Exception as exc:
-                conn.send(("error", f"{type(exc).__name__}: {exc}"))
+                outbox.send(("error", f"{type(exc).__name__}: {exc}"))
                 continue
             seconds = time.perf_counter() - t0
-            conn.send(("ok", (image, seconds, {"gl_renderer": renderer.gl_renderer,
-                                               "first_frame_renders": renderer.first_frame_renders})))
+            outbox.send(("ok", (image, seconds, {"gl_renderer": renderer.gl_renderer,
+                                                 "first_frame_renders": renderer.first_frame_renders})))
     except (EOFError, BrokenPipeError):
         pass
     finally:

@@ -28,9 +28,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import struct
 import time
-import zlib
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -38,6 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .camera import Camera
+from .image import png_bytes as _png_bytes
 from .image import to_rgba8
 from .mesh import TetMesh
 from .scene import Scene, load_scene
@@ -66,16 +65,8 @@ PICKER_COLORMAPS = tuple(sorted(PRESETS)) + ("magma", "inferno", "plasma", "civi
 
 # ---------------------------------------------------------------- images
 def png_bytes(image: ArrayLike, background: Sequence[float] | None = (1.0, 1.0, 1.0)) -> bytes:
-    """A premultiplied float RGBA image (row 0 at the top) as PNG file bytes."""
-    rgba = to_rgba8(image, background)
-    h, w, _ = rgba.shape
-    raw = b"".join(b"\x00" + rgba[i].tobytes() for i in range(h))
-
-    def chunk(tag: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
-
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0))
-            + chunk(b"IDAT", zlib.compress(raw, 1)) + chunk(b"IEND", b""))
+    """A premultiplied float RGBA image as PNG bytes, fast compression for live frames."""
+    return _png_bytes(image, background, level=1)
 
 
 # ---------------------------------------------------------------- camera
@@ -310,9 +301,9 @@ def histogram_image(values: ArrayLike, tf: TransferFunction, scalar_range: tuple
         y0 = y[col] if col == 0 else y[col - 1]
         a, b = sorted((int(y0), int(y[col])))
         img[a:b + 1, col, :3] = 1.0
-    for i, (t, a) in enumerate(points):
-        cx = int(round(float(t) * (w - 1)))
-        cy = int(round((1.0 - float(a)) * (h - 3))) + 1
+    for i, (pt, pa) in enumerate(points):
+        cx = int(round(float(pt) * (w - 1)))
+        cy = int(round((1.0 - float(pa)) * (h - 3))) + 1
         colour = (1.0, 0.2, 0.2) if i == selected else (1.0, 1.0, 1.0)
         img[max(cy - 3, 0):cy + 4, max(cx - 3, 0):cx + 4, :3] = 0.0
         img[max(cy - 2, 0):cy + 3, max(cx - 2, 0):cx + 3, :3] = colour
@@ -924,17 +915,18 @@ def run_desktop(scene: Scene | str | os.PathLike[str], *, settle_s: float = 0.25
         import moderngl_window as mglw
     except ImportError:
         raise RuntimeError("`tetvr view` needs moderngl-window: pip install moderngl-window") from None
-    if not isinstance(scene, Scene):
+    if isinstance(scene, Scene):
+        source = Path(scene.mesh_path).with_suffix(".json")
+    else:
         source = Path(scene)
         scene = load_scene(scene)
-    else:
-        source = Path(scene.mesh_path).with_suffix(".json")
     model = ViewerModel(scene, settle_s=settle_s, preview_scale=preview_scale)
     width, height = scene.size
+    mesh_name, field = Path(scene.mesh_path).name, scene.mesh.scalar_name
 
     class ViewWindow(mglw.WindowConfig):  # type: ignore[misc, name-defined]
         gl_version = (3, 3)
-        title = f"tetvr — {Path(scene.mesh_path).name} ({scene.mesh.scalar_name})"
+        title = f"tetvr — {mesh_name} ({field})"
         window_size = (width, height)
         aspect_ratio = width / height
         resizable = False
@@ -970,7 +962,8 @@ def run_desktop(scene: Scene | str | os.PathLike[str], *, settle_s: float = 0.25
             if image is not None:
                 self._upload(image)
             self.ctx.screen.use()
-            self.ctx.clear(*model.background)
+            r, g, b = model.background
+            self.ctx.clear(r, g, b, 1.0)
             self.tex.use(0)
             self.vao.render(moderngl.TRIANGLE_STRIP)
 
@@ -1011,6 +1004,6 @@ def run_desktop(scene: Scene | str | os.PathLike[str], *, settle_s: float = 0.25
         key_event = on_key_event
 
     try:
-        mglw.run_window_config(ViewWindow, args=[])
+        mglw.run_window_config(ViewWindow, args=["--window", "pyglet"])
     finally:
         model.close()

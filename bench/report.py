@@ -1,0 +1,55 @@
+"""Markdown tables from bench/results/speed_accuracy.json (printed; paste into README).
+
+    python bench/report.py [bench/results/speed_accuracy.json]
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def main(argv: list[str]) -> int:
+    path = Path(argv[0]) if argv else ROOT / "bench" / "results" / "speed_accuracy.json"
+    r = json.loads(path.read_text())
+    scenes = r["scenes"]
+    names = list(r["variants"])
+    print(f"Speed against accuracy at {r['size'][0]}x{r['size'][1]} on {r.get('gl', {}).get('GL_RENDERER', '?')} "
+          f"({r['created']}): PSNR in dB against the reference / frame CPU time in ms; **bold**: on the Pareto front.\n")
+    print("| variant | " + " | ".join(f"{s} ({d['n_tets']} tets)" for s, d in scenes.items()) + " |")
+    print("|---|" + "---|" * len(scenes))
+    for key in names:
+        cells = []
+        for d in scenes.values():
+            v = d["variants"].get(key)
+            if v is None:
+                cells.append("–")
+                continue
+            cell = f"{v['psnr']:.1f} / {v['frame_s'] * 1e3:.0f}"
+            cells.append(f"**{cell}**" if v["pareto"] else cell)
+        print(f"| {key} | " + " | ".join(cells) + " |")
+    print("\nHAPT metrics (max error, mean error over covered pixels, % of covered pixels off by > 1/255):\n")
+    print("| scene | " + " | ".join(k for k in ("default", "sort=mpvonc", "sort=none") if k in names) + " |")
+    print("|---|" + "---|" * 3)
+    for s, d in scenes.items():
+        cells = []
+        for k in ("default", "sort=mpvonc", "sort=none"):
+            v = d["variants"].get(k)
+            if v is not None:
+                cells.append(f"{v['max_error']:.3f}, {v['mean_error']:.5f}, {v['pct_over_1_255']:.2f} %")
+        print(f"| {s} | " + " | ".join(cells) + " |")
+    if r.get("stability"):
+        print("\nStability cases (PSNR, dB, 96x96): the default and the worst variant\n")
+        print("| case | default | worst variant |")
+        print("|---|---|---|")
+        for n, d in r["stability"].items():
+            worst = min(d, key=lambda k: d[k]["psnr"])
+            print(f"| {n} | {d['default']['psnr']:.1f} | {worst}: {d[worst]['psnr']:.1f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
