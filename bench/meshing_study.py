@@ -57,7 +57,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="coarser levels and fine mesh (under a minute)")
     ap.add_argument("--size", type=int, default=64, help="image width and height in pixels")
-    ap.add_argument("--repeats", type=int, default=5, help="timed GPU frames per mesh")
+    ap.add_argument("--repeats", type=int, default=7, help="timed GPU frames per mesh")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
     args = ap.parse_args()
     import trimesh
@@ -68,7 +68,7 @@ def main() -> None:
     box = synthetic.cube(1, size=2.0, rotate=False)  # the sphere's bounding box, to fit the camera
     camera = Camera.fit(box, direction=(-1.0, -0.6, -1.2), zoom=1.3)
     foot = pixel_footprint(camera, size, surface.vertices)
-    levels = [24.0, 12.0, 6.0, 3.0] if args.quick else [16.0, 8.0, 4.0, 2.8, 2.0]
+    levels = [24.0, 12.0, 6.0, 3.0] if args.quick else [16.0, 8.0, 4.0, 2.8, 2.4, 2.0]
     fine_ppc = 2.0 if args.quick else 1.25
     print(f"view {size[0]}x{size[1]}, pixel footprint at the sphere {foot:.4f} (world units)")
 
@@ -122,8 +122,21 @@ def main() -> None:
         row["floor_rmse"] = floor
         if paying is None and row["mesh_rmse"] <= floor:
             paying = row["pixels_per_cell"]
+    # The cell count where the mesh error crosses the 8-bit quantum, log-log interpolated.
+    crossing = None
+    for r0, r1 in zip(rows[:-1], rows[1:]):
+        e0, e1 = r0["mesh_rmse"], r1["mesh_rmse"]
+        if e0 > QUANTUM_RMSE >= e1 and e0 > e1 > 0:
+            f = np.log(e0 / QUANTUM_RMSE) / np.log(e0 / e1)
+            crossing = {"cells": float(np.exp(np.log(r0["cells"]) + f * np.log(r1["cells"] / r0["cells"]))),
+                        "gpu_ms": float(np.exp(np.log(r0["gpu_ms"]) + f * np.log(r1["gpu_ms"] / r0["gpu_ms"]))),
+                        "pixels_per_cell": float(np.exp(np.log(r0["pixels_per_cell"])
+                                                        + f * np.log(r1["pixels_per_cell"] / r0["pixels_per_cell"])))}
     verdict = (f"mesh error falls below max(method error, 8-bit quantum) at {paying} px per cell"
                if paying is not None else "mesh error stays above the floor at every level measured: finer still pays")
+    if crossing:
+        verdict += (f"; it crosses the quantum near {crossing['pixels_per_cell']:.2g} px per cell, "
+                    f"~{crossing['cells'] / 1e3:.0f}k cells, ~{crossing['gpu_ms']:.0f} ms")
     print(verdict)
 
     out = {
@@ -132,6 +145,7 @@ def main() -> None:
         "view": {"size": list(size), "camera": camera.to_dict(), "pixel_footprint": foot},
         "transfer_function": tf.to_dict(),
         "fine": fine_row, "levels": rows, "quantum_rmse": QUANTUM_RMSE, "stops_paying_at_pixels_per_cell": paying,
+        "quantum_crossing": crossing,
         "verdict": verdict, "gl": gl, "machine": {"python": platform.python_version(), "platform": platform.platform()},
         "quick": args.quick,
     }
@@ -160,7 +174,7 @@ def chart(out: dict, path: Path) -> None:
     a.set_xlabel("cells")
     a.set_ylabel("RMSE, premultiplied RGB")
     a.set_title(f"error vs cells ({out['view']['size'][0]}x{out['view']['size'][1]}, sphere)")
-    a.legend(fontsize=8)
+    a.legend(fontsize=8, loc="lower left")
     b.loglog([r["gpu_ms"] for r in rows], [r["total_rmse"] for r in rows], "^-", color="C2")
     for r in rows:
         b.annotate(f"{r['cells'] / 1e3:.0f}k", (r["gpu_ms"], r["total_rmse"]), textcoords="offset points",

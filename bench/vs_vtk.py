@@ -70,7 +70,7 @@ CUBE_NS = (12, 26, 38, 55)  # 10k, 105k, 329k, 998k tets
 REAL_MESHES = (("bluntfin_tets.vtu", "Density"), ("combustor_tets.vtu", "Density"))
 QUICK_MAX_TETS = 330_000
 OPACITY = 0.5
-TARGET = {"min_tets": 200_000, "speedup": 2.0,
+TARGET: dict[str, Any] = {"min_tets": 200_000, "speedup": 2.0,
           "what": "tetvr >= 2x faster than VTK's PT per view change at 512x512 on >= 200k tets, and more accurate"}
 RENDERERS = ("tetvr", "tetvr_parity", "vtk_pt")
 LABELS = {"tetvr": "tetvr (default)", "tetvr_parity": "tetvr, VTK parity", "vtk_pt": "VTK projected tetra"}

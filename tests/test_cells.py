@@ -11,16 +11,13 @@ conform.
 from __future__ import annotations
 
 import itertools
-import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import tetvr
 from tetvr import Camera, TetMesh, TransferFunction
-from tetvr.cells import (VOLUME_CELLS, _REFERENCE, cell_triangulation, read_cells, read_legacy_vtk,
-                         split_cells)
+from tetvr.cells import _REFERENCE, VOLUME_CELLS, cell_triangulation, read_cells, read_legacy_vtk, split_cells
 from tetvr.reference import render_reference
 
 from .conftest import shared_file
@@ -346,9 +343,8 @@ def test_read_splits_hexes_and_carries_point_cell_and_vector_fields(tmp_path):
     apex = np.nonzero(np.all(np.isclose(cell.points, [0.25, 0.1, 1.3]), axis=1))[0][0]
     assert cell.scalars[apex] == 100.0
     assert cell.scalar_range[0] >= 0.0 and cell.scalar_range[1] == 100.0
-    with pytest.raises(ValueError, match="component 3 is out of range"):
-        with pytest.warns(UserWarning):
-            tetvr.read(path, "U", component=3)
+    with pytest.raises(ValueError, match="component 3 is out of range"), pytest.warns(UserWarning):
+        tetvr.read(path, "U", component=3)
 
 
 def test_quadratic_cells_render_through_their_corners(tmp_path):

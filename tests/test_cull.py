@@ -13,8 +13,15 @@ import numpy as np
 import pytest
 
 from tetvr import Camera, TransferFunction, synthetic
-from tetvr.cull import (CullStats, gpu_scalar_margin, outside_view, submesh, transparent_cells, visible_cells,
-                        zero_opacity)
+from tetvr.cull import (
+    CullStats,
+    gpu_scalar_margin,
+    outside_view,
+    submesh,
+    transparent_cells,
+    visible_cells,
+    zero_opacity,
+)
 from tetvr.reference import ray_segments, render_reference
 
 SIZE = (64, 48)

@@ -12,8 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from tetvr import Camera, TetMesh, Volume, synthetic
-from tetvr import meshing
+from tetvr import Camera, TetMesh, Volume, meshing, synthetic
 from tetvr.meshing import interpolate, locate, pixel_footprint, tetrahedralize
 
 

@@ -52,13 +52,21 @@ import functools
 import itertools
 import os
 import re
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["CellSplit", "TetCells", "split_cells", "read_cells", "read_legacy_vtk", "VOLUME_CELLS",
-           "cell_triangulation"]
+__all__ = [
+    "VOLUME_CELLS",
+    "CellSplit",
+    "TetCells",
+    "cell_triangulation",
+    "read_cells",
+    "read_legacy_vtk",
+    "split_cells",
+]
 
 Int = NDArray[np.int64]
 
@@ -283,7 +291,7 @@ class CellSplit:
         mean = (rows * w).sum(axis=1) / w.sum(axis=1)
         return np.concatenate([v.astype(np.result_type(v.dtype, np.float64)), mean])
 
-    def compacted(self, keep: NDArray[np.bool_]) -> "CellSplit":
+    def compacted(self, keep: NDArray[np.bool_]) -> CellSplit:
         """The same split over the points where ``keep`` is true (every tet vertex must be
         kept); :meth:`extend` then expects values for the input points that are kept."""
         if not np.all(keep[self.tets]):
@@ -449,8 +457,8 @@ def _quad_diagonals(cells: dict[str, tuple[Int, Int]]) -> tuple[dict[str, Int], 
         bit = np.where(wants_bd & ~wants_ac, 1, np.where(wants_ac & ~wants_bd, 0, bit))
         conflicts = int(np.sum(wants_bd & wants_ac))
     start = 0
-    for shape, q in quads.items():
-        k, nq = q.shape[:2]
+    for shape, per_cell in quads.items():
+        k, nq = per_cell.shape[:2]
         out[shape] = bit[start:start + k * nq].reshape(k, nq)
         start += k * nq
     return out, conflicts

@@ -42,8 +42,15 @@ from .camera import Camera
 from .mesh import TetMesh
 from .transfer import TransferFunction
 
-__all__ = ["CullStats", "visible_cells", "outside_view", "transparent_cells", "zero_opacity", "gpu_scalar_margin",
-           "submesh"]
+__all__ = [
+    "CullStats",
+    "gpu_scalar_margin",
+    "outside_view",
+    "submesh",
+    "transparent_cells",
+    "visible_cells",
+    "zero_opacity",
+]
 
 # Relative slack on the plane tests: a vertex within this of a plane counts as inside, so
 # rounding never culls a cell that touches the view.

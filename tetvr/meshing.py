@@ -50,7 +50,7 @@ from numpy.typing import ArrayLike, NDArray
 from .camera import Camera
 from .mesh import TetMesh
 
-__all__ = ["MeshingResult", "tetrahedralize", "pixel_footprint", "interpolate", "locate", "DETAILS"]
+__all__ = ["DETAILS", "MeshingResult", "interpolate", "locate", "pixel_footprint", "tetrahedralize"]
 
 #: How :func:`tetrahedralize` picks the target edge length when none is given.
 DETAILS = ("screen", "surface")
@@ -230,7 +230,7 @@ def tetrahedralize(
     seconds_field = time.perf_counter() - start
     mesh = TetMesh.from_arrays(pts, tets, values, scalar_name=scalar_name)
     return MeshingResult(mesh=mesh, edge_length=target, pixel_footprint=footprint, detail=how,
-                         estimated_cells=int(round(estimate)), limited=limited, seconds_meshing=seconds_mesh,
+                         estimated_cells=round(estimate), limited=limited, seconds_meshing=seconds_mesh,
                          seconds_field=seconds_field)
 
 
@@ -486,4 +486,4 @@ def _tet_grid(mesh: TetMesh) -> _TetGrid:
     starts = np.searchsorted(flat[order], np.arange(int(dims.prod()) + 1))
     edges = np.stack([p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]], axis=2)  # columns
     return _TetGrid(lo=lo, step=step, dims=dims, starts=starts, tet_ids=tet[order], p0=p[:, 0].copy(),
-                    inv=np.linalg.inv(edges))
+                    inv=np.linalg.inv(edges).astype(np.float64))

@@ -18,16 +18,20 @@ __all__ = ["render", "default_transfer_function"]
 # classification). Measured on one tet: exact for extents 1e-15 .. 1e19, blank or wrong
 # outside; these bounds keep a margin.
 GPU_EXTENT_RANGE = (1e-13, 1e18)
-# Scalars (of the field and the transfer function) go to the GPU as float32 too.
+# Scalars (of the field and the transfer function) go to the GPU as float32 too: their
+# magnitude must fit, and the table's scalar range must span many float32 steps of it
+# (at 1e-5 of the magnitude, one rounding step is ~1 % of the range).
 GPU_SCALAR_LIMIT = 1e37
+GPU_MIN_RELATIVE_RANGE = 1e-5
 
 
 def default_transfer_function(mesh: TetMesh, *, preset: str = "viridis", opacity: float = 0.5) -> TransferFunction:
     """A preset over the mesh's scalar range; unit distance 1/20 of the mesh's diagonal."""
     lo, hi = mesh.scalar_range
-    if hi <= lo:
-        # A constant field: a small interval above it, wide enough that the GPU's float32
-        # scalars (~6e-8 relative rounding) stay near its start; 1e-6 was only ~15 ulps.
+    if hi - lo <= GPU_MIN_RELATIVE_RANGE * max(abs(lo), abs(hi)):
+        # A constant field, or one whose variation float32 cannot resolve: a small interval
+        # above it, wide enough that the GPU's float32 scalars (~6e-8 relative rounding)
+        # stay near its start (1e-6, as before, was only ~15 float32 steps).
         hi = lo + max(abs(lo), 1.0) * 1e-3
     diag = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
     return TransferFunction.preset(preset, (lo, hi), opacity=opacity, unit_distance=max(diag / 20.0, 1e-30))
@@ -71,6 +75,8 @@ def render(
     if method == "reference":
         from .reference import render_reference
 
+        if settings is not None:
+            kwargs.setdefault("optics", settings.optics)
         return render_reference(mesh, camera, tf, size, **kwargs)
     if method != "gpu":
         raise ValueError(f"method must be 'gpu' or 'reference', got {method!r}")
@@ -86,6 +92,13 @@ def render(
         raise ValueError(
             f"scalar values up to {biggest:.3g} (field or transfer function) are beyond the GPU's float32 "
             f"(limit {GPU_SCALAR_LIMIT:g}); rescale the field and transfer function or use method='reference'"
+        )
+    lo, hi = min(mesh.scalar_range[0], tf.domain[0]), max(mesh.scalar_range[1], tf.domain[1])
+    if lo < hi and hi - lo < GPU_MIN_RELATIVE_RANGE * max(abs(lo), abs(hi)):
+        raise ValueError(
+            f"the scalars and transfer function span {lo!r} .. {hi!r}, too narrow for their magnitude in the "
+            f"GPU's float32 (below {GPU_MIN_RELATIVE_RANGE:g} of it); subtract an offset from the field and "
+            "the transfer function (mesh.with_scalars) or use method='reference'"
         )
     from .gl.renderer import Renderer
 

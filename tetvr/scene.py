@@ -32,7 +32,7 @@ import numpy as np
 
 from .camera import Camera
 from .mesh import TetMesh, read
-from .render import default_transfer_function
+from .render import GPU_MIN_RELATIVE_RANGE, default_transfer_function
 from .settings import RenderSettings
 from .transfer import TransferFunction
 
@@ -157,8 +157,8 @@ def _transfer_function(spec: dict[str, Any], mesh: TetMesh) -> TransferFunction:
     rng = spec.get("range")
     if rng is None:
         rng = mesh.scalar_range
-        if rng[1] <= rng[0]:  # a constant field: the default function's small range around it
-            rng = base.domain
+        if rng[1] - rng[0] <= GPU_MIN_RELATIVE_RANGE * max(abs(rng[0]), abs(rng[1])):
+            rng = base.domain  # a (numerically) constant field: the default function's small range
     elif not (isinstance(rng, (list, tuple)) and len(rng) == 2):
         raise ValueError(f"transfer_function 'range' must be [lo, hi] or null, got {rng!r}")
     # 0 is not "unset": only null takes the default (TransferFunction rejects 0).

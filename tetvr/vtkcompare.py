@@ -510,8 +510,8 @@ def compare(
     Examples
     --------
     >>> from tetvr.scene import load_scene                       # doctest: +SKIP
-    >>> table = compare(load_scene("scene.json"), outdir="out")
-    >>> [(m["label"], m["psnr"]["exact"]) for m in table["methods"]]
+    >>> table = compare(load_scene("scene.json"), outdir="out")  # doctest: +SKIP
+    >>> [(m["label"], m["psnr"]["exact"]) for m in table["methods"]]  # doctest: +SKIP
     """
     from .reference import render_reference
     from .scene import Scene, load_scene
@@ -528,7 +528,8 @@ def compare(
     if not (isinstance(views, int) and views >= 1):
         raise ValueError(f"views must be a positive integer, got {views!r}")
     say = log or (lambda line: None)
-    size = tuple(int(v) for v in (size or scene.size))  # type: ignore[assignment]
+    width, height = (int(v) for v in (size or scene.size))
+    size = (width, height)
     mesh, tf, camera = scene.mesh, scene.tf, scene.camera
     cams = [orbit(camera, azimuth_step * (i + 1)) for i in range(views)]
 
@@ -595,7 +596,8 @@ def _table(scene: Any, size: tuple[int, int], views: int, step: float, methods: 
     exact = refs["exact"]
     covered = exact[..., 3] > 1.0 / 255.0
     for m in methods:
-        assert m.image is not None
+        if m.image is None:
+            raise AssertionError(f"{m.key} has no image")
         row: dict[str, Any] = {"key": m.key, "label": m.label, "kind": m.kind,
                                "first_frame_s": m.first_frame_s,
                                "view_change_s": statistics.median(m.view_change_s) if m.view_change_s else None,
@@ -608,7 +610,7 @@ def _table(scene: Any, size: tuple[int, int], views: int, step: float, methods: 
         rows.append(row)
     pt = next((m.image for m in methods if m.key == "vtk_pt"), None)
     for row, m in zip(rows, methods):
-        if pt is not None:
+        if pt is not None and m.image is not None:
             row["psnr_vs_vtk_pt"] = psnr(m.image, pt)
             row["max_abs_diff_vs_vtk_pt"] = float(np.abs(m.image.astype(np.float64) - pt).max())
     tetvr_row = next((r for r in rows if r["key"] == "tetvr"), None)

@@ -161,6 +161,10 @@ def well_shaped_tet(draw):
     gradient = np.array(draw(st.tuples(*[st.floats(-2, 2)] * 3)))
     offset = draw(st.floats(-5, 5))
     scalars = offset + points @ gradient
+    # A field that varies by less than ~1e-4 of its magnitude is beyond the GPU's float32
+    # scalars (tetvr.render refuses it; test_render_inputs); constant fields are fine.
+    span = np.ptp(scalars)
+    assume(span == 0 or span > 1e-4 * max(1.0, float(np.abs(scalars).max())))
     return TetMesh.from_arrays(points, [[0, 1, 2, 3]], scalars)
 
 
@@ -168,7 +172,7 @@ def well_shaped_tet(draw):
 @given(data=st.data(), mesh=well_shaped_tet())
 def test_random_tet_matches_the_reference(exact_renderer, data, mesh):
     lo, hi = mesh.scalar_range
-    if hi - lo < 1e-9:
+    if hi == lo:
         lo, hi = lo - 0.5, hi + 0.5
     diag = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
     knots = st.sampled_from([0.0, 0.2, 0.25, 0.5, 0.7, 0.9, 1.0])
