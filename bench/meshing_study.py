@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import statistics
 import sys
@@ -86,6 +87,7 @@ def main() -> None:
     truth = render_reference(fine.mesh, camera, tf, size)
     print(f"  reference image of the fine mesh: {time.perf_counter() - t:.1f} s")
 
+    load_before = os.getloadavg()
     rows = []
     with tetvr.Renderer() as renderer:
         renderer.render(fine.mesh, camera, tf, size=size)  # compile and warm up
@@ -146,7 +148,10 @@ def main() -> None:
         "transfer_function": tf.to_dict(),
         "fine": fine_row, "levels": rows, "quantum_rmse": QUANTUM_RMSE, "stops_paying_at_pixels_per_cell": paying,
         "quantum_crossing": crossing,
-        "verdict": verdict, "gl": gl, "machine": {"python": platform.python_version(), "platform": platform.platform()},
+        "verdict": verdict, "gl": gl,
+        # llvmpipe renders on the CPU: other processes show up in the GPU times (see bench/README.md).
+        "machine": {"python": platform.python_version(), "platform": platform.platform(), "cpus": os.cpu_count(),
+                    "load_average_before": load_before, "load_average_after": os.getloadavg()},
         "quick": args.quick,
     }
     (args.out / "meshing_study.json").write_text(json.dumps(out, indent=2, default=str))

@@ -63,7 +63,7 @@ def test_zero_opacity_matches_dense_sampling():
 
 @pytest.mark.parametrize("parallel", [False, True])
 def test_culled_cells_meet_no_ray(parallel):
-    mesh, tf, camera = _scene(parallel=parallel)
+    mesh, _, camera = _scene(parallel=parallel)
     out = outside_view(mesh, camera, size=SIZE)
     assert 0 < out.sum() < mesh.n_tets
     seg = ray_segments(mesh, camera, SIZE)
@@ -99,7 +99,7 @@ def test_gpu_image_bit_identical_with_only_visible_cells(renderer, parallel):
 
 
 def test_margin_keeps_cells_whose_table_lookups_reach_the_ramp():
-    mesh, tf, camera = _scene(parallel=True)
+    mesh, tf, _ = _scene(parallel=True)
     margin = gpu_scalar_margin(mesh, tf)
     exact = transparent_cells(mesh, tf)
     padded = transparent_cells(mesh, tf, scalar_margin=margin)

@@ -37,8 +37,8 @@ all list first; the mid-side nodes stay in the point list unused. Surface, line 
 vertex cells, polyhedra and n-gonal prisms are not volume cells that this module splits:
 they are counted and left out.
 
-Cells with repeated nodes (a hex collapsed into a wedge by repeating a node) give some
-tets with a repeated vertex; those have no volume and are dropped, with a count.
+Split cells with repeated nodes (a hex collapsed into a wedge by repeating a node) give
+some tets with a repeated vertex; those have no volume and are dropped, with a count.
 
 Reading: :func:`read_cells` reads with meshio and falls back to a reader of legacy VTK
 unstructured grids here (ASCII or binary), for the files meshio refuses (meshio 5.3 has no
@@ -340,7 +340,7 @@ def split_cells(points: ArrayLike, blocks: Sequence[tuple[str, Any]]) -> CellSpl
     >>> cube = [[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)]
     >>> s = split_cells(cube, [("hexahedron", [[0, 1, 3, 2, 4, 5, 7, 6]])])
     >>> s.tets.shape, s.split, s.steiner_points
-    ((5, 4), (('hexahedron', 1),), 0)
+    ((6, 4), (('hexahedron', 1),), 0)
     """
     pts = np.array(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
@@ -383,6 +383,7 @@ def split_cells(points: ArrayLike, blocks: Sequence[tuple[str, Any]]) -> CellSpl
 
     tets_out: list[Int] = []
     parent_out: list[Int] = []
+    split_out: list[NDArray[np.bool_]] = []
     centroid_rows: list[Int] = []
     n_new = 0
     for shape, (corners, parent) in cells.items():
@@ -400,18 +401,23 @@ def split_cells(points: ArrayLike, blocks: Sequence[tuple[str, Any]]) -> CellSpl
                 centroid_rows.append(np.pad(corners[sel], ((0, 0), (0, 8 - corners.shape[1])), constant_values=-1))
             tets_out.append(ext[:, local].reshape(-1, 4))
             parent_out.append(np.repeat(parent[sel], local.shape[0]))
+            split_out.append(np.full(sel.shape[0] * local.shape[0], shape != "tetra"))
 
     if tets_out:
         tets = np.concatenate(tets_out)
         parent_all = np.concatenate(parent_out)
+        from_split = np.concatenate(split_out)
     else:
         tets = np.zeros((0, 4), np.int64)
         parent_all = np.zeros(0, np.int64)
+        from_split = np.zeros(0, dtype=bool)
     # Keep the input order of the cells (a stable sort by parent).
     order = np.argsort(parent_all, kind="stable")
-    tets, parent_all = tets[order], parent_all[order]
+    tets, parent_all, from_split = tets[order], parent_all[order], from_split[order]
     s = np.sort(tets, axis=1)
-    repeated = np.any(s[:, 1:] == s[:, :-1], axis=1)
+    # Only split cells lose such tets here; a tet listed with a repeated node stays, for
+    # TetMesh.from_arrays to refuse as before.
+    repeated = np.any(s[:, 1:] == s[:, :-1], axis=1) & from_split
     if np.any(repeated):
         tets, parent_all = tets[~repeated], parent_all[~repeated]
     cc = np.concatenate(centroid_rows) if centroid_rows else np.zeros((0, 8), np.int64)
@@ -749,14 +755,14 @@ def read_legacy_vtk(path: str | os.PathLike[str]) -> tuple[
         raise ValueError(f"{name!r}: {types.shape[0]} CELL_TYPES for {offsets.shape[0] - 1} CELLS")
     blocks: list[tuple[str, Any]] = []
     run_starts = np.r_[0, np.nonzero(np.diff(types))[0] + 1, types.shape[0]]
-    for s, e in zip(run_starts[:-1], run_starts[1:]):
+    for s, e in itertools.pairwise(run_starts):
         ctype = VTK_CELL_TYPES.get(int(types[s]), f"vtk_type_{int(types[s])}")
         sizes = np.diff(offsets[s:e + 1])
         if np.all(sizes == sizes[0]):
             blocks.append((ctype, conn[offsets[s]:offsets[e]].reshape(e - s, int(sizes[0]))))
         else:
             blocks.append((ctype, [conn[offsets[i]:offsets[i + 1]] for i in range(s, e)]))
-    cell_data = {k: [v[s:e] for s, e in zip(run_starts[:-1], run_starts[1:])] for k, v in cell_flat.items()}
+    cell_data = {k: [v[s:e] for s, e in itertools.pairwise(run_starts)] for k, v in cell_flat.items()}
     return points, blocks, point_data, cell_data
 
 

@@ -47,8 +47,9 @@ def write_png(image: ArrayLike, path: str | os.PathLike[str], *, background: Seq
 
     ``background`` is composited under the image; ``None`` writes a translucent RGBA PNG.
     """
+    data = png_bytes(image, background=background)  # first: a rejected image leaves no empty file
     with open(path, "wb") as f:
-        f.write(png_bytes(image, background=background))
+        f.write(data)
 
 
 def png_bytes(image: ArrayLike, background: Sequence[float] | None = (1.0, 1.0, 1.0), *, level: int = 6) -> bytes:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Literal
 
+import numpy as np
+
 from .optics import OPTICS
 
 __all__ = ["RenderSettings", "SORT_METHODS", "TABLE_ENCODINGS", "TABLE_DTYPES"]
@@ -84,8 +86,13 @@ class RenderSettings:
             raise ValueError(f"table_dtype must be one of {TABLE_DTYPES}, got {self.table_dtype!r}")
         for name, lo, hi in (("table_scalar_bins", 2, 2048), ("table_thickness_slices", 1, 256)):
             v = getattr(self, name)
-            if not isinstance(v, int) or isinstance(v, bool) or not lo <= v <= hi:
+            if not isinstance(v, (int, np.integer)) or isinstance(v, (bool, np.bool_)) or not lo <= v <= hi:
                 raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
+            object.__setattr__(self, name, int(v))
+        if not isinstance(self.perspective_correct, (bool, np.bool_)):
+            raise ValueError(f"perspective_correct must be True or False, got {self.perspective_correct!r}")
+        if isinstance(self.table_log_base, (str, bytes)):
+            raise ValueError(f"table_log_base must be a number, got {self.table_log_base!r}")
         if not (1.0 < float(self.table_log_base) <= 100.0):
             raise ValueError(f"table_log_base must be in (1, 100], got {self.table_log_base!r}")
         object.__setattr__(self, "table_log_base", float(self.table_log_base))

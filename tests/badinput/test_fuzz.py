@@ -6,9 +6,11 @@ pipeline. Deterministic (``derandomize=True``) and small, so CI sees the same ca
    raises ValueError/TypeError with a message, or both renderers return a finite
    premultiplied image with alpha in [0, 1], and GL reports no error.
 2. One random well-shaped tet with a random linear field: the reference is exact and any
-   visibility order is trivially right, so the GPU must agree with it. Bar: 35 dB PSNR;
-   the measured minimum over these cases is far above (the table's 128 scalar bins and
-   16 thickness slices are the only approximation).
+   visibility order is trivially right, so the GPU must agree with it. Bar: 35 dB PSNR.
+   Measured over 300 non-derandomized cases: minimum 64 dB, median 94 dB (the table's
+   128 scalar bins and 16 thickness slices are the only approximation); fields that vary
+   by less than ~1e-4 of their magnitude are left out, as float32 cannot resolve them
+   (``tetvr.render`` refuses them, see test_render_inputs).
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from tetvr.reference import render_reference
 
 pytestmark = pytest.mark.gl
 
-FUZZ = settings(max_examples=25, deadline=None, derandomize=True, print_blob=True,
+FUZZ = settings(max_examples=25, deadline=None, derandomize=True, database=None, print_blob=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 SIZE = (16, 16)
 EXACT_SIZE = (32, 32)

@@ -138,10 +138,13 @@ class Renderer:
         prog = self._programs.get(key)
         if prog is not None:
             return prog
-        stages = {"classify": {"compute_shader": "classify.comp"},
-                  "tet": {"vertex_shader": "tet.vert", "fragment_shader": "tet.frag"},
-                  "floor": {"vertex_shader": "tet.vert", "fragment_shader": "floor.frag"},
-                  "depth": {"vertex_shader": "tet.vert", "fragment_shader": "depth.frag"}}[kind]
+        programs = {"classify": {"compute_shader": "classify.comp"},
+                    "tet": {"vertex_shader": "tet.vert", "fragment_shader": "tet.frag"},
+                    "floor": {"vertex_shader": "tet.vert", "fragment_shader": "floor.frag"},
+                    "depth": {"vertex_shader": "tet.vert", "fragment_shader": "depth.frag"}}
+        if kind not in programs:
+            raise ValueError(f"unknown shader {kind!r}; choose one of {sorted(programs)}")
+        stages = programs[kind]
         sources: dict[str, str] = {}
         all_files: list[str] = []
         try:
@@ -348,7 +351,11 @@ class Renderer:
         else:
             order_ids = np.asarray(order)
             if order_ids.shape != (mesh.n_tets,) or order_ids.dtype.kind not in "iu":
-                raise ValueError(f"order must list all {mesh.n_tets} cells once, got shape {order_ids.shape}")
+                raise ValueError(f"order must be {mesh.n_tets} integer cell ids, got {order_ids.dtype} "
+                                 f"of shape {order_ids.shape}")
+            if mesh.n_tets and (order_ids.min() < 0 or order_ids.max() >= mesh.n_tets
+                                or np.bincount(order_ids, minlength=mesh.n_tets).max() != 1):
+                raise ValueError(f"order must list every cell id 0..{mesh.n_tets - 1} exactly once")
         self._clock.lap("sort")
 
         defines = dict(PERSPECTIVE_CORRECT=int(self.settings.perspective_correct),
