@@ -63,3 +63,25 @@ def test_one_pixel_image(renderer):
     mesh = synthetic.single_tet()
     img = renderer.render(mesh, Camera.fit(mesh, zoom=0.2), default_transfer_function(mesh, opacity=0.9), size=(1, 1))
     assert img.shape == (1, 1, 4) and np.all(np.isfinite(img))
+
+
+def test_missing_gl_gives_an_install_hint(monkeypatch):
+    import moderngl
+
+    from tetvr.gl import GLUnavailableError
+    from tetvr.gl.context import create_context
+
+    def broken(**kwargs):
+        raise Exception("eglGetDisplay failed")
+
+    monkeypatch.setattr(moderngl, "create_standalone_context", broken)
+    with pytest.raises(GLUnavailableError, match=r"OpenGL 4\.3.*eglGetDisplay failed.*apt-get install libegl1"):
+        create_context()
+
+
+def test_gpu_bytes_counts_what_the_renderer_holds():
+    mesh = synthetic.cube(2)
+    with Renderer(RenderSettings(table_scalar_bins=32, table_thickness_slices=4)) as r:
+        r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(16, 8))
+        expected = mesh.n_points * 16 + mesh.n_tets * (16 + 48 + 4) + 5 * 32 * 32 * 16 + 16 * 8 * 16
+        assert r.gpu_bytes() == expected

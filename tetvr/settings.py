@@ -45,6 +45,8 @@ class RenderSettings:
         interpolation along the log-thickness axis.
     perspective_correct : interpolate front/back scalars and thickness
         perspective-correctly (Kraus et al. 2004) rather than linearly in screen space.
+    cull : drop cells outside the view, or whose scalars map to zero opacity, before
+        drawing (:mod:`tetvr.cull`; the image is unchanged, the count is in the stats).
     framebuffer : ``"float32"`` compositing target, or ``"uint8"`` (what 8-bit
         renderers such as VTK's do; for measuring what float compositing buys).
     optics : how transfer-function opacity becomes light (:data:`tetvr.optics.OPTICS`):
@@ -69,6 +71,7 @@ class RenderSettings:
     table_filter: Literal["linear", "cubic"] = "linear"
     perspective_correct: bool = True
     framebuffer: Literal["float32", "uint8"] = "float32"
+    cull: bool = False
     optics: Literal["exact", "linear", "vtk"] = "exact"
 
     def __post_init__(self) -> None:
@@ -89,6 +92,8 @@ class RenderSettings:
             if not isinstance(v, (int, np.integer)) or isinstance(v, (bool, np.bool_)) or not lo <= v <= hi:
                 raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
             object.__setattr__(self, name, int(v))
+        if not isinstance(self.cull, (bool, np.bool_)):
+            raise ValueError(f"cull must be True or False, got {self.cull!r}")
         if not isinstance(self.perspective_correct, (bool, np.bool_)):
             raise ValueError(f"perspective_correct must be True or False, got {self.perspective_correct!r}")
         if isinstance(self.table_log_base, (str, bytes)):

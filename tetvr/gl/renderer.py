@@ -19,6 +19,7 @@ from ..camera import Camera
 from ..mesh import TetMesh
 from ..preintegrate import PreintegrationTable, table_for
 from ..settings import RenderSettings
+from ..cull import gpu_scalar_margin, visible_cells
 from ..sort import sort_with_stats
 from ..transfer import TransferFunction
 from .context import create_context, describe
@@ -40,6 +41,7 @@ class FrameStats:
     n_tets: int = 0
     size: tuple[int, int] = (0, 0)
     cycle_breaks: int = 0  # visibility cycles the sort had to break (MPVONC)
+    n_culled: int = 0  # cells dropped before drawing (RenderSettings.cull)
     upload: float = 0.0
     classify: float = 0.0
     sort: float = 0.0
@@ -132,6 +134,15 @@ class Renderer:
             objs += [fbo, *fbo.color_attachments]
         return objs
 
+    def gpu_bytes(self) -> int:
+        """Bytes of GPU memory held in this renderer's buffers, table and targets."""
+        total = sum(b.size for b in [*self._mesh_buffers, self._fans, self._order] if b is not None)
+        if self._table is not None:
+            total += self._table.data.nbytes
+        for (size, components, dtype) in self._targets:
+            total += size[0] * size[1] * components * (4 if dtype == "f4" else 1)
+        return int(total)
+
     # ---- programs ----
     def _program(self, kind: str, **defines: int) -> Any:
         key = (kind, *(f"{k}={v}" for k, v in sorted(defines.items())))
@@ -194,22 +205,24 @@ class Renderer:
             self._order.write(np.arange(chunk, dtype=np.uint32).tobytes())
         self._mesh = mesh
 
-    def _chunks(self, mesh: TetMesh, order: NDArray[np.uint32]) -> Iterator[int]:
-        """Make each chunk of the drawing order current in turn; yields its cell count.
+    def _chunks(self, mesh: TetMesh, order: NDArray[np.uint32]) -> Iterator[tuple[int, int]]:
+        """Make each chunk of the drawing order current in turn; yields the number of
+        cells to classify and to draw.
 
-        Unchunked meshes are one chunk: the order buffer holds the order. Chunked meshes
+        Unchunked meshes are one chunk: all cells are classified, the order buffer holds
+        the order (which may list a subset: the cells left after culling). Chunked meshes
         get the cells of each chunk uploaded in drawing order, with an identity order.
         """
         if not self._chunked:
             self._order.write(np.ascontiguousarray(order, dtype=np.uint32).tobytes())
             self._clock.lap("order_upload")
-            yield mesh.n_tets
+            yield mesh.n_tets, int(order.shape[0])
             return
-        for first in range(0, mesh.n_tets, self.chunk_tets):
+        for first in range(0, int(order.shape[0]), self.chunk_tets):
             ids = order[first:first + self.chunk_tets]
             self._mesh_buffers[1].write(np.ascontiguousarray(mesh.tets[ids], dtype=np.int32).tobytes())
             self._clock.lap("order_upload")
-            yield int(ids.shape[0])
+            yield int(ids.shape[0]), int(ids.shape[0])
 
     def _use_table(self, table: PreintegrationTable) -> None:
         if table is self._table:
@@ -323,7 +336,8 @@ class Renderer:
         ----------
         mesh, camera, tf : the scene.
         size : (width, height) in pixels.
-        order : an explicit drawing order (cell ids, back to front) instead of the sort.
+        order : an explicit drawing order (cell ids, back to front) instead of the sort;
+            it may leave cells out (they are not drawn).
         shader : "tet" (the real thing) or "floor" (constant colour; fill-rate floor).
 
         Returns
@@ -344,18 +358,26 @@ class Renderer:
         self._use_table(table)
         self._clock.lap("table")
         uniforms = self._view_uniforms(mesh, camera, size)
-        cycle_breaks = 0
+        cycle_breaks = n_culled = 0
         if order is None:
             order_ids, sort_stats = sort_with_stats(mesh, camera, self.settings.sort)
             cycle_breaks = sort_stats.n_cycle_breaks
+            if self.settings.cull:
+                # Sort everything, then filter: MPVONC constraints through culled cells hold.
+                keep, _ = visible_cells(mesh, camera, tf, size=size,
+                                        scalar_margin=gpu_scalar_margin(mesh, tf, self.settings))
+                mask = np.zeros(mesh.n_tets, dtype=bool)
+                mask[keep] = True
+                order_ids = order_ids[mask[order_ids]]
+                n_culled = mesh.n_tets - int(order_ids.shape[0])
         else:
             order_ids = np.asarray(order)
-            if order_ids.shape != (mesh.n_tets,) or order_ids.dtype.kind not in "iu":
-                raise ValueError(f"order must be {mesh.n_tets} integer cell ids, got {order_ids.dtype} "
+            if order_ids.ndim != 1 or order_ids.shape[0] > mesh.n_tets or order_ids.dtype.kind not in "iu":
+                raise ValueError(f"order must be at most {mesh.n_tets} integer cell ids, got {order_ids.dtype} "
                                  f"of shape {order_ids.shape}")
-            if mesh.n_tets and (order_ids.min() < 0 or order_ids.max() >= mesh.n_tets
-                                or np.bincount(order_ids, minlength=mesh.n_tets).max() != 1):
-                raise ValueError(f"order must list every cell id 0..{mesh.n_tets - 1} exactly once")
+            if order_ids.size and (order_ids.min() < 0 or order_ids.max() >= mesh.n_tets
+                                   or np.bincount(order_ids, minlength=mesh.n_tets).max() != 1):
+                raise ValueError(f"order must list cell ids in 0..{mesh.n_tets - 1}, each at most once")
         self._clock.lap("sort")
 
         defines = dict(PERSPECTIVE_CORRECT=int(self.settings.perspective_correct),
@@ -372,12 +394,13 @@ class Renderer:
         fbo.use()
         fbo.clear(0.0, 0.0, 0.0, 0.0)
         self._clock.lap("setup")
-        for n in self._chunks(mesh, order_ids):
-            self._classify(n, uniforms)
+        for n_classify, n in self._chunks(mesh, order_ids):
+            self._classify(n_classify, uniforms)
             self._table_tex.use(0)
             self._draw(prog, fbo, n, ((moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA), moderngl.FUNC_ADD))
         image = self._read(fbo, size, 4, fb_dtype)
-        self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, cycle_breaks=cycle_breaks, **self._clock.laps)
+        self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, cycle_breaks=cycle_breaks, n_culled=n_culled,
+                                     **self._clock.laps)
         return image
 
     def depth_extent(self, mesh: TetMesh, camera: Camera, *, size: tuple[int, int] = (512, 512)
@@ -405,8 +428,8 @@ class Renderer:
         fbo.use()
         fbo.clear(3e38, 3e38, 0.0, 0.0)
         # Any order will do: MIN blending is commutative.
-        for n in self._chunks(mesh, np.arange(mesh.n_tets, dtype=np.uint32)):
-            self._classify(n, uniforms)
+        for n_classify, n in self._chunks(mesh, np.arange(mesh.n_tets, dtype=np.uint32)):
+            self._classify(n_classify, uniforms)
             self._draw(prog, fbo, n, ((moderngl.ONE, moderngl.ONE), moderngl.MIN))
         ext = self._read(fbo, size, 2)
         front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)
