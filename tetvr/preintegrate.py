@@ -164,7 +164,7 @@ def table_for(
     return _cached(tf, (lo, hi), d_top, n_bins, n_slices, float(log_base), encoding, dtype, optics)
 
 
-@functools.lru_cache(maxsize=8)
+@functools.lru_cache(maxsize=32)
 def _cached(tf: TransferFunction, scalar_range: tuple[float, float], d_max: float, n_bins: int,
             n_slices: int, log_base: float, encoding: str, dtype: str, optics: str = "exact") -> PreintegrationTable:
     return build_table(tf, scalar_range, d_max, n_bins=n_bins, n_slices=n_slices, log_base=log_base,

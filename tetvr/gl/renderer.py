@@ -94,6 +94,7 @@ class Renderer:
         self._fans: Any = None
         self._order: Any = None
         self._table: PreintegrationTable | None = None
+        self._table_key: tuple[Any, ...] | None = None
         self._table_tex: Any = None
         self._targets: dict[tuple[tuple[int, int], int, str], Any] = {}
         self._clock = Clock(self.ctx, False)
@@ -260,11 +261,21 @@ class Renderer:
 
     # ---- the frame ----
     def table(self, mesh: TetMesh, tf: TransferFunction) -> PreintegrationTable:
-        """The pre-integration table this renderer uses for a mesh and transfer function."""
+        """The pre-integration table this renderer uses for a mesh and transfer function.
+
+        The renderer keeps its current table, so a frame with the same inputs reuses it
+        whatever other renderers did to the shared cache of :func:`table_for`.
+        """
         s = self.settings
-        return table_for(tf, mesh.scalar_range, mesh.max_edge, n_bins=s.table_scalar_bins,
-                         n_slices=s.table_thickness_slices, log_base=s.table_log_base,
-                         encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics)
+        key = (tf, mesh.scalar_range, mesh.max_edge, s.table_scalar_bins, s.table_thickness_slices,
+               s.table_log_base, s.table_encoding, s.table_dtype, s.optics)
+        if self._table is not None and key == self._table_key:
+            return self._table
+        table = table_for(tf, mesh.scalar_range, mesh.max_edge, n_bins=s.table_scalar_bins,
+                          n_slices=s.table_thickness_slices, log_base=s.table_log_base,
+                          encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics)
+        self._table_key = key
+        return table
 
     def _view_uniforms(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> dict[str, Any]:
         """Upload the mesh if new; the uniforms of this view."""
