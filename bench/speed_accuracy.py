@@ -54,7 +54,7 @@ def variants() -> dict[str, RenderSettings]:
     for k, base in ((8, 4.0), (14, 2.2), (24, 1.6)):
         v[f"K={k}, base {base}"] = dataclasses.replace(DEFAULT, table_thickness_slices=k, table_log_base=base)
     for method in SORTERS:
-        if method != DEFAULT.sort and method in SORT_METHODS:
+        if method not in (DEFAULT.sort, "auto") and method in SORT_METHODS:
             v[f"sort={method}"] = dataclasses.replace(DEFAULT, sort=method)
     v["premultiplied, uint8, screen-linear (VTK-like)"] = dataclasses.replace(
         DEFAULT, table_encoding="premultiplied", table_dtype="uint8", perspective_correct=False, framebuffer="uint8")

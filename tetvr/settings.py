@@ -12,7 +12,7 @@ from .optics import OPTICS
 __all__ = ["RenderSettings", "SORT_METHODS", "TABLE_ENCODINGS", "TABLE_DTYPES"]
 
 #: Visibility orderings (see :mod:`tetvr.sort`).
-SORT_METHODS = ("centroid", "mpvo", "mpvonc", "none")
+SORT_METHODS = ("auto", "centroid", "mpvo", "mpvonc", "none")
 #: How the pre-integration table is stored and looked up (see :mod:`tetvr.preintegrate`).
 TABLE_ENCODINGS = ("normalized", "premultiplied")
 TABLE_DTYPES = ("float32", "uint8")
@@ -28,7 +28,8 @@ class RenderSettings:
 
     Parameters
     ----------
-    sort : visibility order of the cells: ``"centroid"`` (back to front by centroid
+    sort : visibility order of the cells: ``"auto"`` (default: ``"mpvonc"`` up to 100k
+        cells, where it costs little next to drawing, ``"centroid"`` beyond), ``"centroid"`` (back to front by centroid
         distance; fast, wrong where large cells overlap small ones), ``"mpvo"`` (Williams'
         MPVO: exact for convex meshes), ``"mpvonc"`` (MPVO with Williams' non-convex
         heuristic; cycles are broken and counted) or ``"none"`` (input order; only for
@@ -62,7 +63,7 @@ class RenderSettings:
     128
     """
 
-    sort: Literal["centroid", "mpvo", "mpvonc", "none"] = "centroid"
+    sort: Literal["auto", "centroid", "mpvo", "mpvonc", "none"] = "auto"
     table_scalar_bins: int = 256
     table_thickness_slices: int = 16
     table_log_base: float = 2.0

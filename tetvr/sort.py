@@ -328,7 +328,19 @@ def _input_order(mesh: TetMesh, camera: Camera) -> NDArray[np.uint32]:
     return np.arange(mesh.n_tets, dtype=np.uint32)
 
 
+#: Below this many cells ``"auto"`` uses MPVONC: there its per-view cost (~0.3 us per cell
+#: on 2 CPU cores) is small next to drawing, and it is exact where centroid order fails;
+#: above, centroid order (~30 ns per cell) keeps view changes fast.
+AUTO_MPVONC_MAX_CELLS = 100_000
+
+
+def auto_method(mesh: TetMesh) -> str:
+    """The sort ``"auto"`` picks for a mesh: MPVONC for small meshes, centroid beyond."""
+    return "mpvonc" if mesh.n_tets <= AUTO_MPVONC_MAX_CELLS else "centroid"
+
+
 SORTERS: dict[str, Callable[[TetMesh, Camera], NDArray[np.uint32]]] = {
+    "auto": lambda mesh, camera: SORTERS[auto_method(mesh)](mesh, camera),
     "centroid": centroid_order,
     "mpvo": lambda mesh, camera: mpvo_order(mesh, camera)[0],
     "mpvonc": lambda mesh, camera: mpvonc_order(mesh, camera)[0],
@@ -362,6 +374,8 @@ def sort_with_stats(mesh: TetMesh, camera: Camera, method: str = "centroid") -> 
     >>> stats.method, stats.n_cycle_breaks
     ('mpvonc', 0)
     """
+    if method == "auto":
+        method = auto_method(mesh)
     if method in _SORTERS_WITH_STATS:
         return _SORTERS_WITH_STATS[method](mesh, camera)
     ids = visibility_order(mesh, camera, method)
