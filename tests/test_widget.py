@@ -221,7 +221,7 @@ def test_model_progressive_frames_reuse_the_order(tmp_path, monkeypatch):
     model.final()
     assert rec.calls[-1]["size"] == (80, 60) and len(sorts) == 1
     first_order = rec.calls[-1]["order"]
-    np.testing.assert_array_equal(first_order, real(model.mesh, model.camera, "centroid"))
+    np.testing.assert_array_equal(first_order, real(model.mesh, model.camera, model.settings.sort))
     # Drag: two previews at half size with the first order, no sort.
     for k in range(2):
         clock.now += 0.05
