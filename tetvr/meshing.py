@@ -41,6 +41,7 @@ import importlib.machinery
 import importlib.util
 import math
 import os
+import tempfile
 import time
 from typing import Any
 
@@ -216,9 +217,17 @@ def tetrahedralize(
     wrapper = _tetwild()
     start = time.perf_counter()
     empty = (np.empty((0, 3)), np.empty((0, 4), np.int32), np.empty(0))
-    pts, tets = wrapper.tetrahedralize_mesh(
-        vertices, faces.astype(np.uint32), bool(optimize), False, target / diag, target, float(epsilon),
-        10.0, bool(coarsen), int(threads), 80, 6, True, False, False, *empty)
+    # fTetWild writes __tracked_surface.stl into the working directory: keep it out of the
+    # user's (not thread-safe: the process's working directory changes for the call).
+    here = os.getcwd()
+    with tempfile.TemporaryDirectory(prefix="tetvr-tetwild-") as scratch:
+        os.chdir(scratch)
+        try:
+            pts, tets = wrapper.tetrahedralize_mesh(
+                vertices, faces.astype(np.uint32), bool(optimize), False, target / diag, target, float(epsilon),
+                10.0, bool(coarsen), int(threads), 80, 6, True, False, False, *empty)
+        finally:
+            os.chdir(here)
     seconds_mesh = time.perf_counter() - start
     pts = np.asarray(pts, dtype=np.float64)
     tets = np.asarray(tets, dtype=np.int64)
