@@ -85,3 +85,12 @@ def test_gpu_bytes_counts_what_the_renderer_holds():
         r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(16, 8))
         expected = mesh.n_points * 16 + mesh.n_tets * (16 + 48 + 4) + 5 * 32 * 32 * 16 + 16 * 8 * 16
         assert r.gpu_bytes() == expected
+
+
+def test_viewer_blit_shaders_compile():
+    from tetvr.gl.shaders import assemble
+
+    with Renderer() as r:
+        prog = r.ctx.program(vertex_shader=assemble("blit.vert")[0], fragment_shader=assemble("blit.frag")[0])
+        assert r.ctx.error == "GL_NO_ERROR"
+        prog.release()

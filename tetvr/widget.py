@@ -934,11 +934,10 @@ def run_desktop(scene: Scene | str | os.PathLike[str], *, settle_s: float = 0.25
 
         def __init__(self, **kw: Any) -> None:
             super().__init__(**kw)
-            self.prog = self.ctx.program(
-                vertex_shader="#version 330\nin vec2 in_pos; out vec2 v_uv;\n"
-                              "void main(){ v_uv = in_pos * 0.5 + 0.5; gl_Position = vec4(in_pos, 0, 1); }",
-                fragment_shader="#version 330\nuniform sampler2D u_image; in vec2 v_uv; out vec4 f_color;\n"
-                                "void main(){ f_color = vec4(texture(u_image, vec2(v_uv.x, 1.0 - v_uv.y)).rgb, 1); }")
+            from .gl.shaders import assemble
+
+            self.prog = self.ctx.program(vertex_shader=assemble("blit.vert")[0],
+                                         fragment_shader=assemble("blit.frag")[0])
             quad = np.array([-1, -1, 1, -1, -1, 1, 1, 1], dtype="f4")
             self.vbo = self.ctx.buffer(quad.tobytes())
             self.vao = self.ctx.vertex_array(self.prog, [(self.vbo, "2f", "in_pos")])
