@@ -171,7 +171,7 @@ class Camera:
         if unknown:
             raise ValueError(f"unknown camera keys {sorted(unknown)}; expected some of {sorted(names)}")
         kw = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
-        return cls(**kw)
+        return cls(**kw)  # type: ignore[arg-type]  # validated in __post_init__
 
     # ---- the frame ----
     @property

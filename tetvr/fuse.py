@@ -160,7 +160,7 @@ def compose(
     for m in modes:
         name = None if m is None else ray_textures.modes[m]
         where = np.ones(front.shape, bool) if m is None else ray_textures.mode == m
-        if not where.any():
+        if not np.any(where):
             continue
         a = np.where(has_mesh, np.minimum(t1, front), t1).astype(np.float32)
         b = np.where(has_mesh, np.maximum(t0, back), np.inf).astype(np.float32)

@@ -195,12 +195,12 @@ def _as_float_array(value: ArrayLike, name: str) -> NDArray[np.float64]:
     return np.array(arr, dtype=np.float64, copy=True)
 
 
-def _signed_volume6(points: NDArray[np.float64], tets: NDArray[np.int64]) -> NDArray[np.float64]:
+def _signed_volume6(points: NDArray[np.float64], tets: NDArray[np.integer[Any]]) -> NDArray[np.float64]:
     p = points[tets]
     return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0])
 
 
-def _max_edge(points: NDArray[np.float64], tets: NDArray[np.int64]) -> NDArray[np.float64]:
+def _max_edge(points: NDArray[np.float64], tets: NDArray[np.integer[Any]]) -> NDArray[np.float64]:
     p = points[tets]
     pairs = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
     return np.max([np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in pairs], axis=0)

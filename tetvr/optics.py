@@ -151,7 +151,7 @@ def integrate_pieces(
     start = np.cumsum(np.bincount(part, minlength=n)) - np.bincount(part, minlength=n)
     w = np.exp(-(before - before[start][part]))
     out = np.stack([np.bincount(part, weights=rgb[:, c] * w, minlength=n) for c in range(3)], axis=1)
-    return out, total
+    return out.astype(np.float64), total.astype(np.float64)
 
 
 def integrate_linear_pieces(

@@ -43,6 +43,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -282,7 +283,7 @@ def build_table(
                                log_base=float(log_base), encoding=encoding, alpha_scale=alpha_scale)
 
 
-def _diagonal_runs(color: NDArray[np.float64], tau_bin: NDArray[np.float64], thick: NDArray[np.float64]) -> NDArray[np.float64]:
+def _diagonal_runs(color: NDArray[np.float64], tau_bin: NDArray[np.float64], thick: NDArray[np.floating[Any]]) -> NDArray[np.float64]:
     """Premultiplied colour of every run of bins, for every slice: out[k, n, i] is the run
     of n bins starting at node i, crossed front to back in total length thick[k].
 

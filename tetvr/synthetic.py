@@ -104,7 +104,7 @@ def interlocking_rings(n_around: int = 12, n_cross: int = 1) -> TetMesh:
     """Two linked rings (like chain links): non-convex, disconnected, and each ring passes
     through the other, so no single back-to-front order of coarse cells by centroid exists."""
     a = torus(1.0, 0.25, n_around, n_cross)
-    b = torus(1.0, 0.25, n_around, n_cross, field=lambda p: 0.25 + 0.5 * (p[:, 2] > 0))
+    b = torus(1.0, 0.25, n_around, n_cross, field=lambda p: (0.25 + 0.5 * (p[:, 2] > 0)).astype(np.float64))
     rot = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # ring b stands upright
     b_pts = b.points @ rot.T + np.array([1.0, 0.0, 0.0])
     b = TetMesh.from_arrays(b_pts, b.tets, b.scalars)

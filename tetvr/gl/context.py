@@ -27,7 +27,7 @@ def create_context() -> Any:
     except ImportError as exc:  # pragma: no cover - moderngl is a hard dependency
         raise GLUnavailableError(f"moderngl is not installed ({exc}); pip install moderngl") from exc
     try:
-        ctx = moderngl.create_standalone_context(backend="egl", require=REQUIRED_GL)
+        ctx = moderngl.create_standalone_context(backend="egl", require=REQUIRED_GL)  # type: ignore[arg-type]
     except Exception as exc:
         raise GLUnavailableError(
             f"could not create an OpenGL {REQUIRED_GL // 100}.{REQUIRED_GL % 100 // 10} context through EGL: "
