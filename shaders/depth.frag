@@ -8,9 +8,7 @@
 
 #include "common.glsl"
 
-noperspective in vec4 v_front;
-noperspective in vec4 v_back;
-noperspective in vec2 v_scalar;
+noperspective in vec4 v_segment;
 flat in int v_exact_tet;
 
 uniform vec2 u_viewport;
@@ -29,8 +27,14 @@ void main() {
             zf = min(zf, z); zb = max(zb, z);
         }
     } else {
-        zf = -(v_front.z / v_front.w);
-        zb = -(v_back.z / v_back.w);
+        zf = v_segment.x;
+        zb = v_segment.z;
+#if PERSPECTIVE_CORRECT
+        if (u_perspective == 1) {
+            zf = 1.0 / zf;
+            zb = 1.0 / zb;
+        }
+#endif
     }
     if (zb <= u_near || zf >= u_far) discard;
     f_extent = vec2(max(zf, u_near), -min(zb, u_far));

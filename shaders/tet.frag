@@ -3,7 +3,7 @@
 // 3D pre-integration table (Kraus et al. 2004), and emits premultiplied RGBA for
 // back-to-front "over" blending (ONE, ONE_MINUS_SRC_ALPHA) into an RGBA32F target.
 //
-// In:  v_front, v_back, v_scalar, v_exact_tet (see tet.vert); u_near, u_far, u_viewport.
+// In:  v_segment, v_exact_tet (see tet.vert); u_near, u_far, u_viewport.
 // Out: f_color, premultiplied.
 // The segment is clipped to the near and far planes here, per fragment, so tets that
 // cross them are cut rather than dropped.
@@ -11,9 +11,7 @@
 #include "common.glsl"
 #include "lookup.glsl"
 
-noperspective in vec4 v_front;
-noperspective in vec4 v_back;
-noperspective in vec2 v_scalar;
+noperspective in vec4 v_segment;
 flat in int v_exact_tet;
 
 uniform vec2 u_viewport;  // width, height in pixels
@@ -63,20 +61,26 @@ void main() {
         return;
     }
 #endif
-    vec3 pf = v_front.xyz / v_front.w;
-    vec3 pb = v_back.xyz / v_back.w;
-    float sf = v_scalar.x / v_front.w;
-    float sb = v_scalar.y / v_back.w;
-    // Depths along the view axis: -z.
-    float zf = -pf.z, zb = -pb.z;
+    // Front and back depth (along the view axis) and scalar of this pixel's segment.
+    float zf = v_segment.x, sf = v_segment.y, zb = v_segment.z, sb = v_segment.w;
+    // World length per unit of depth along this pixel's ray.
+    float per_depth = 1.0;
+    if (u_perspective == 1) {
+#if PERSPECTIVE_CORRECT
+        zf = 1.0 / zf; sf *= zf; zb = 1.0 / zb; sb *= zb;
+#endif
+        vec2 xy = (gl_FragCoord.xy / u_viewport * 2.0 - 1.0) / vec2(u_proj[0][0], u_proj[1][1]);
+        per_depth = sqrt(1.0 + dot(xy, xy));
+    }
     if (zb <= u_near || zf >= u_far) discard;
     if (zf < u_near) {
-        float f = (u_near - zf) / (zb - zf);
-        pf = mix(pf, pb, f); sf = mix(sf, sb, f);
+        sf = mix(sf, sb, (u_near - zf) / (zb - zf));
+        zf = u_near;
     }
     if (zb > u_far) {
-        float f = (u_far - zf) / (zb - zf);
-        pb = mix(pf, pb, f); sb = mix(sf, sb, f);
+        sb = mix(sf, sb, (u_far - zf) / (zb - zf));
+        zb = u_far;
     }
-    f_color = lookup_segment(sf, sb, length(pb - pf));
+    // Rounding can order a flat segment's ends the wrong way: its length is 0, not negative.
+    f_color = lookup_segment(sf, sb, max(zb - zf, 0.0) * per_depth);
 }

@@ -4,20 +4,19 @@
 // a 3-vertex silhouette leaves the 4th triangle degenerate.
 //
 // In:  Fans, Order (back-to-front tet ids), Points, u_view, u_proj, u_perspective.
-// Out: noperspective v_front = (p_front_eye, 1) / w_f, v_back = (p_back_eye, 1) / w_b,
-//      v_scalar = (s_front / w_f, s_back / w_b): divided by the eye depth w in perspective
-//      so that a linear interpolation in screen space followed by a division by the
-//      interpolated 1/w is perspective-correct (Kraus et al. 2004). With
-//      PERSPECTIVE_CORRECT 0, w = 1 and the interpolation is screen-linear.
+// Out: noperspective v_segment = (1/w_f, s_f/w_f, 1/w_b, s_b/w_b), w the eye depth of the
+//      front and back points: both lie on one plane per fan triangle, where 1/w and s/w
+//      are affine in screen space, so interpolating them linearly and dividing is
+//      perspective-correct (Kraus et al. 2004). The front and back points lie on the
+//      pixel's ray, so their depths and scalars are all the fragment needs. Parallel
+//      projections (and PERSPECTIVE_CORRECT 0) interpolate (w_f, s_f, w_b, s_b) linearly.
 
 #include "common.glsl"
 
 layout(std430, binding = 2) readonly buffer Fans { TetFan fans[]; };
 layout(std430, binding = 3) readonly buffer Order { uint order[]; };
 
-noperspective out vec4 v_front;
-noperspective out vec4 v_back;
-noperspective out vec2 v_scalar;
+noperspective out vec4 v_segment;
 flat out int v_exact_tet;  // >= 0: intersect the ray with this tet exactly in tet.frag
 
 void main() {
@@ -30,7 +29,7 @@ void main() {
     v_exact_tet = -1;
     if (fan.ids.w == -2) {
         gl_Position = vec4(2.0, 2.0, 0.0, 1.0);
-        v_front = vec4(0.0); v_back = vec4(0.0); v_scalar = vec2(0.0);
+        v_segment = vec4(0.0);
         return;
     }
     if (fan.ids.x < 0) {
@@ -40,13 +39,13 @@ void main() {
         vec2 xy = corner < 6 ? mix(fan.front.xy, fan.front.zw, vec2(quad[min(corner, 5)])) : vec2(2.0);
         gl_Position = vec4(xy, 0.0, 1.0);
         v_exact_tet = -1 - fan.ids.x;
-        v_front = vec4(0.0); v_back = vec4(0.0); v_scalar = vec2(0.0);
+        v_segment = vec4(0.0);
         return;
     }
     if (tri >= count) {
         // Not drawn: every corner at one point outside the view gives no fragments.
         gl_Position = vec4(2.0, 2.0, 0.0, 1.0);
-        v_front = vec4(0.0); v_back = vec4(0.0); v_scalar = vec2(0.0);
+        v_segment = vec4(0.0);
         return;
     }
     vec3 front_eye, back_eye;
@@ -63,13 +62,12 @@ void main() {
     }
     vec4 clip = u_proj * vec4(front_eye, 1.0);
     gl_Position = vec4(clip.xy / clip.w, 0.0, 1.0);
+    float wf = -front_eye.z, wb = -back_eye.z;
 #if PERSPECTIVE_CORRECT
-    float wf = u_perspective == 1 ? -front_eye.z : 1.0;
-    float wb = u_perspective == 1 ? -back_eye.z : 1.0;
-#else
-    float wf = 1.0, wb = 1.0;
+    if (u_perspective == 1) {
+        v_segment = vec4(1.0 / wf, sf / wf, 1.0 / wb, sb / wb);
+        return;
+    }
 #endif
-    v_front = vec4(front_eye, 1.0) / wf;
-    v_back = vec4(back_eye, 1.0) / wb;
-    v_scalar = vec2(sf / wf, sb / wb);
+    v_segment = vec4(wf, sf, wb, sb);
 }
