@@ -1,24 +1,26 @@
 // lookup.glsl -- the pre-integrated segment integral, read from the 3D table.
 //
 // Table: sampler3D with width = front scalar, height = back scalar, depth = thickness
-// slice (slice 0 = zero thickness, slices 1..K = u_d_min * u_log_base^(k-1)), linear
+// slice (slice 0 = zero thickness, slices 1..K = d_min * base^(k-1)), linear
 // filtering (TABLE_CUBIC 1: Catmull-Rom across slices instead). TABLE_NORMALIZED 1: RGB = colour per unit alpha, A = mean extinction, so
 // alpha = 1 - exp(-d A) is exact in d; 0: premultiplied RGBA (Kraus et al. 2004).
 // Returns premultiplied RGBA.
 
+// The per-fragment arithmetic is reduced to multiply-adds by constants that
+// PreintegrationTable.gl_uniforms() derives once per table.
+
 uniform sampler3D u_table;
 uniform vec2 u_scalar_range;   // scalars of the first and last table node
-uniform float u_d_min;         // thickness of slice 1
-uniform float u_inv_log_base;  // 1 / ln(base)
 uniform float u_alpha_scale;   // stored A * u_alpha_scale = extinction (uint8 tables)
 uniform vec3 u_table_size;     // (N, N, K + 1)
+uniform vec4 u_lookup;         // scalar -> texel coordinate (scale, offset), its clamp (lo, hi)
+uniform vec3 u_slices;         // 1 / d_min, 1 / log2(base), K (the last slice)
 
 vec4 lookup_segment(float sf, float sb, float d) {
-    vec2 s = clamp((vec2(sf, sb) - u_scalar_range.x) / (u_scalar_range.y - u_scalar_range.x), 0.0, 1.0);
-    float slice = d < u_d_min ? d / u_d_min : 1.0 + log(d / u_d_min) * u_inv_log_base;
-    slice = clamp(slice, 0.0, u_table_size.z - 1.0);
-    // Node i sits at texel centre (i + 0.5) / size.
-    vec2 st = (s * (u_table_size.xy - 1.0) + 0.5) / u_table_size.xy;
+    // Node i sits at texel centre (i + 0.5) / N.
+    vec2 st = clamp(vec2(sf, sb) * u_lookup.x + u_lookup.y, u_lookup.z, u_lookup.w);
+    float x = d * u_slices.x;
+    float slice = clamp(x < 1.0 ? x : 1.0 + log2(x) * u_slices.y, 0.0, u_slices.z);
 #if defined(TABLE_CUBIC) && TABLE_CUBIC
     // Catmull-Rom along the thickness axis: four slices, each read at its texel centre.
     float k0 = floor(slice), f = slice - k0;

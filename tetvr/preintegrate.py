@@ -99,6 +99,18 @@ class PreintegrationTable:
     def d_max(self) -> float:
         return float(self.thicknesses[-1])
 
+    def gl_uniforms(self) -> dict[str, Any]:
+        """The uniforms ``shaders/lookup.glsl`` reads this table with (texture unit 0)."""
+        lo, hi = self.scalar_range
+        n = self.n_bins
+        scale = (n - 1) / ((hi - lo) * n)
+        return dict(
+            u_table=0, u_scalar_range=(lo, hi), u_alpha_scale=self.alpha_scale,
+            u_table_size=(n, n, self.n_slices + 1),
+            u_lookup=(scale, 0.5 / n - lo * scale, 0.5 / n, (n - 0.5) / n),
+            u_slices=(1.0 / self.d_min, 1.0 / math.log2(self.log_base), float(self.n_slices)),
+        )
+
     def slice_coordinate(self, thickness: NDArray[np.float64]) -> NDArray[np.float64]:
         """Fractional slice index of a thickness (the GPU does the same in GLSL)."""
         d = np.asarray(thickness, dtype=np.float64)

@@ -352,9 +352,8 @@ class Raycaster:
             table = self.table(volume, tf, s)
             self._use_table(table)
             scalar_range = table.scalar_range
-            table_uniforms = dict(u_d_min=table.d_min, u_inv_log_base=1.0 / np.log(table.log_base),
-                                  u_alpha_scale=table.alpha_scale,
-                                  u_table_size=(table.n_bins, table.n_bins, table.n_slices + 1), u_table=0)
+            table_uniforms = table.gl_uniforms()
+            del table_uniforms["u_scalar_range"]  # set below for both paths
         else:
             scalar_range = _classification_range(volume, tf)
         self._use_tf(tf, scalar_range, s.tf_samples)

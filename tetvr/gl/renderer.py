@@ -397,9 +397,7 @@ class Renderer:
         if shader == "tet":
             defines["NEAR_CROSSING"] = int(_crosses_near_plane(mesh, camera))
         prog = self._program(shader, **defines)
-        set_uniforms(prog, u_scalar_range=table.scalar_range, u_d_min=table.d_min,
-             u_inv_log_base=1.0 / np.log(table.log_base), u_alpha_scale=table.alpha_scale,
-             u_table_size=(table.n_bins, table.n_bins, table.n_slices + 1), u_table=0, **uniforms)
+        set_uniforms(prog, **table.gl_uniforms(), **uniforms)
         fb_dtype = "f4" if self.settings.framebuffer == "float32" else "f1"
         fbo = self._use_target(size, 4, fb_dtype)
         fbo.use()
