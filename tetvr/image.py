@@ -5,12 +5,25 @@ from __future__ import annotations
 import os
 import struct
 import zlib
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["write_png", "png_bytes", "to_rgba8", "composite_over", "psnr", "rmse"]
+__all__ = ["image_size", "write_png", "png_bytes", "to_rgba8", "composite_over", "psnr", "rmse"]
+
+
+def image_size(size: Any) -> tuple[int, int]:
+    """``(width, height)`` as two positive ints; bools and fractional values are refused."""
+    try:
+        width, height = size
+    except (TypeError, ValueError):
+        raise ValueError(f"size must be (width, height), got {size!r}") from None
+    if not all(isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)) for v in (width, height)):
+        raise ValueError(f"size must be two integers (width, height), got {size!r}")
+    if width < 1 or height < 1:
+        raise ValueError(f"size must be two positive integers (width, height), got {size!r}")
+    return int(width), int(height)
 
 
 def composite_over(image: ArrayLike, background: Sequence[float] | None) -> NDArray[np.float64]:

@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .camera import Camera
+from .image import image_size
 from .reference import composite, integrate_segments
 from .transfer import TransferFunction
 from .volume import Volume
@@ -189,13 +190,7 @@ class RaycastSettings:
 
 
 def _check_size(size: Any) -> tuple[int, int]:
-    try:
-        width, height = (int(v) for v in size)
-    except (TypeError, ValueError):
-        raise ValueError(f"size must be (width, height), got {size!r}") from None
-    if (width, height) != tuple(size) or width < 1 or height < 1:
-        raise ValueError(f"size must be two positive integers (width, height), got {size!r}")
-    return width, height
+    return image_size(size)
 
 
 def normalize_ray_limits(t_start: ArrayLike | None, t_end: ArrayLike | None, size: tuple[int, int]) -> tuple[Float, Float]:

@@ -58,6 +58,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .camera import Camera
+from .image import image_size
 from .mesh import TetMesh
 from .optics import _SUB_THETA, OPTICS, integrate_linear_pieces, integrate_pieces, piece_optical_depth, vtk_segments
 from .transfer import TransferFunction
@@ -181,13 +182,7 @@ def _validate(mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> tuple[int
         raise TypeError(f"mesh must be a TetMesh, got {type(mesh).__name__}")
     if not isinstance(camera, Camera):
         raise TypeError(f"camera must be a Camera, got {type(camera).__name__}")
-    try:
-        width, height = (int(v) for v in size)
-    except (TypeError, ValueError):
-        raise ValueError(f"size must be (width, height), got {size!r}") from None
-    if (width, height) != tuple(size) or width < 1 or height < 1:
-        raise ValueError(f"size must be two positive integers (width, height), got {size!r}")
-    return width, height
+    return image_size(size)
 
 
 def _tet_geometry(mesh: TetMesh, camera: Camera, rays: _EyeRays) -> _TetGeometry:

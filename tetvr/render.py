@@ -80,15 +80,15 @@ def render(
         return render_reference(mesh, camera, tf, size, **kwargs)
     if method != "gpu":
         raise ValueError(f"method must be 'gpu' or 'reference', got {method!r}")
-    _check_float32_range(mesh, tf)
     from .gl.renderer import Renderer
 
     with Renderer(settings) as renderer:
         return renderer.render(mesh, camera, tf, size=size, **kwargs)
 
 
-def _check_float32_range(mesh: TetMesh, tf: TransferFunction) -> None:
-    """Refuse scenes the GPU's float32 cannot resolve, rather than return a wrong picture."""
+def check_float32_range(mesh: TetMesh, tf: TransferFunction) -> None:
+    """Refuse scenes the GPU's float32 cannot resolve, rather than return a wrong picture
+    (called by :meth:`tetvr.gl.Renderer.render` for every frame)."""
     extent = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
     if not GPU_EXTENT_RANGE[0] <= extent <= GPU_EXTENT_RANGE[1]:
         raise ValueError(

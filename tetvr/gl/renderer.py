@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from ..camera import Camera
 from ..mesh import TetMesh
 from ..preintegrate import PreintegrationTable, table_for
+from ..render import check_float32_range
 from ..settings import RenderSettings
 from ..cull import gpu_scalar_margin, visible_cells
 from ..sort import sort_with_stats
@@ -365,6 +366,7 @@ class Renderer:
         import moderngl
 
         size = self._check(size)
+        check_float32_range(mesh, tf)
         table = self.table(mesh, tf)
         self._use_table(table)
         self._clock.lap("table")

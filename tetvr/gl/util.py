@@ -7,18 +7,14 @@ from typing import Any
 
 import numpy as np
 
+from ..image import image_size
+
 __all__ = ["check_size", "set_uniforms", "Clock"]
 
 
 def check_size(size: tuple[int, int], ctx: Any) -> tuple[int, int]:
     """(width, height) as ints, within 1 .. the GL's texture and viewport limit."""
-    try:
-        width, height = size
-    except (TypeError, ValueError):
-        raise ValueError(f"size must be (width, height), got {size!r}") from None
-    if not all(isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)) for v in (width, height)):
-        raise ValueError(f"size must be two integers (width, height), got {size!r}")
-    width, height = int(width), int(height)
+    width, height = image_size(size)
     limit = int(min(ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384), ctx.info.get("GL_MAX_VIEWPORT_DIMS", (16384,))[0]))
     if not (1 <= width <= limit and 1 <= height <= limit):
         raise ValueError(f"image size {size!r} is outside 1..{limit} pixels per side (the GL limit here)")
