@@ -29,11 +29,11 @@ vec4 lookup_segment(float sf, float sb, float d) {
     vec4 t = vec4(0.0);
     for (int i = 0; i < 4; ++i) {
         float k = clamp(k0 + float(i - 1), 0.0, u_table_size.z - 1.0);
-        t += w[i] * texture(u_table, vec3(st, (k + 0.5) / u_table_size.z));
+        t += w[i] * textureLod(u_table, vec3(st, (k + 0.5) / u_table_size.z), 0.0);
     }
     t = max(t, 0.0);
 #else
-    vec4 t = texture(u_table, vec3(st, (slice + 0.5) / u_table_size.z));
+    vec4 t = textureLod(u_table, vec3(st, (slice + 0.5) / u_table_size.z), 0.0);
 #endif
 #if TABLE_NORMALIZED
     t.rgb = min(t.rgb, 1.0);

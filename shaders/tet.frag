@@ -6,7 +6,10 @@
 // In:  v_segment, v_exact_tet (see tet.vert); u_near, u_far, u_viewport.
 // Out: f_color, premultiplied.
 // The segment is clipped to the near and far planes here, per fragment, so tets that
-// cross them are cut rather than dropped.
+// cross them are cut rather than dropped. Defines (one program per combination):
+// PERSPECTIVE, PERSPECTIVE_CORRECT, CLIP_RANGE (some point lies outside the clipping
+// range), NEAR_CROSSING (some point lies before the near plane). llvmpipe pays for a
+// runtime branch even when no fragment takes it, so view-wide cases are compiled in.
 
 #include "common.glsl"
 #include "lookup.glsl"
@@ -64,14 +67,17 @@ void main() {
     // Front and back depth (along the view axis) and scalar of this pixel's segment.
     float zf = v_segment.x, sf = v_segment.y, zb = v_segment.z, sb = v_segment.w;
     // World length per unit of depth along this pixel's ray.
-    float per_depth = 1.0;
-    if (u_perspective == 1) {
+#if PERSPECTIVE
 #if PERSPECTIVE_CORRECT
-        zf = 1.0 / zf; sf *= zf; zb = 1.0 / zb; sb *= zb;
+    zf = 1.0 / zf; sf *= zf; zb = 1.0 / zb; sb *= zb;
 #endif
-        vec2 xy = (gl_FragCoord.xy / u_viewport * 2.0 - 1.0) / vec2(u_proj[0][0], u_proj[1][1]);
-        per_depth = sqrt(1.0 + dot(xy, xy));
-    }
+    vec2 xy = (gl_FragCoord.xy / u_viewport * 2.0 - 1.0) / vec2(u_proj[0][0], u_proj[1][1]);
+    float per_depth = sqrt(1.0 + dot(xy, xy));
+#else
+    const float per_depth = 1.0;
+#endif
+#if CLIP_RANGE
+    // Compiled in only for views where some point lies outside the clipping range.
     if (zb <= u_near || zf >= u_far) discard;
     if (zf < u_near) {
         sf = mix(sf, sb, (u_near - zf) / (zb - zf));
@@ -81,6 +87,7 @@ void main() {
         sb = mix(sf, sb, (u_far - zf) / (zb - zf));
         zb = u_far;
     }
+#endif
     // Rounding can order a flat segment's ends the wrong way: its length is 0, not negative.
     f_color = lookup_segment(sf, sb, max(zb - zf, 0.0) * per_depth);
 }

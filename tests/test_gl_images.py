@@ -9,6 +9,7 @@ may disagree about coverage.
 
 from __future__ import annotations
 
+import dataclasses
 import numpy as np
 import pytest
 
@@ -174,6 +175,22 @@ def test_camera_inside_and_near_plane(renderer, name, camera):
     # Tets crossing the near plane are intersected per fragment, not dropped.
     mesh = synthetic.cube(6)
     _compare(renderer, name, mesh, camera, _tf(mesh))
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_far_plane_cuts_the_mesh(renderer, parallel):
+    # The far clip is compiled in only for views that need it (CLIP_RANGE): the segment
+    # must end at the far plane, as in the reference, in both projections.
+    mesh = synthetic.cube(6)
+    cam = Camera.fit(mesh, direction=(-0.3, -0.2, -1.0), parallel=parallel)
+    near, far = cam.clipping_range
+    centre = float(np.asarray(cam.focal_point) @ np.asarray(cam.direction) - np.asarray(cam.position) @ np.asarray(cam.direction))
+    cut = dataclasses.replace(cam, clipping_range=(near, centre))
+    full = renderer.render(mesh, cam, _tf(mesh), size=(96, 96))
+    value = _compare(renderer, f"far_plane_{'parallel' if parallel else 'perspective'}", mesh, cut, _tf(mesh), size=(96, 96))
+    assert value >= MIN_PSNR
+    # And the cut is visible: half the mesh is gone.
+    assert renderer.render(mesh, cut, _tf(mesh), size=(96, 96))[..., 3].sum() < 0.8 * full[..., 3].sum()
 
 
 @pytest.mark.parametrize("parallel", [False, True])

@@ -397,7 +397,9 @@ class Renderer:
                        TABLE_NORMALIZED=int(table.encoding == "normalized"),
                        TABLE_CUBIC=int(self.settings.table_filter == "cubic"))
         if shader == "tet":
-            defines["NEAR_CROSSING"] = int(_crosses_near_plane(mesh, camera))
+            before_near, beyond_far = _outside_clipping_range(mesh, camera)
+            defines.update(NEAR_CROSSING=int(before_near), CLIP_RANGE=int(before_near or beyond_far),
+                           PERSPECTIVE=int(not camera.parallel_projection))
         prog = self._program(shader, **defines)
         set_uniforms(prog, **table.gl_uniforms(), **uniforms)
         fb_dtype = "f4" if self.settings.framebuffer == "float32" else "f1"
@@ -448,7 +450,9 @@ class Renderer:
         return front, back
 
 
-def _crosses_near_plane(mesh: TetMesh, camera: Camera) -> bool:
-    """Whether any point lies nearer than the near plane (then some tet may cross it)."""
+def _outside_clipping_range(mesh: TetMesh, camera: Camera) -> tuple[bool, bool]:
+    """Whether any point lies nearer than the near plane (then some tet may cross it), and
+    whether any lies beyond the far plane."""
     depth = (mesh.points - np.asarray(camera.position)) @ np.asarray(camera.direction)
-    return bool(depth.min() < camera.clipping_range[0])
+    near, far = camera.clipping_range
+    return bool(depth.min() < near), bool(depth.max() > far)
