@@ -13,9 +13,9 @@ from tetvr import Camera, RenderSettings, TetMesh, synthetic
 from tetvr import adjacency as adjacency_mod
 from tetvr import sort as sort_mod
 from tetvr.settings import SORT_METHODS
-from tetvr.sort import SORTERS, centroid_order, mpvo_order, mpvonc_order, sort_with_stats, visibility_order
+from tetvr.sort import SORTERS, centroid_order, mpvo_order, mpvonc_order, sort_with_stats, visibility_order, xmpvo_order
 
-GRAPH_SORTS = [mpvo_order, mpvonc_order]
+GRAPH_SORTS = [mpvo_order, mpvonc_order, xmpvo_order]
 
 
 @pytest.fixture(autouse=True)
@@ -225,7 +225,7 @@ def test_mpvonc_draws_a_hidden_component_first():
 # ---------------------------------------------------------------- (4) determinism, invariance
 
 
-@pytest.mark.parametrize("method", ["mpvo", "mpvonc"])
+@pytest.mark.parametrize("method", ["mpvo", "mpvonc", "xmpvo"])
 def test_deterministic_and_invariant_to_input_listing(method):
     mesh = jittered_cube(4, seed=9)
     cam = Camera.fit(mesh, direction=(0.4, -1.0, 0.2))
@@ -242,7 +242,7 @@ def test_deterministic_and_invariant_to_input_listing(method):
 
 
 def test_registered_everywhere():
-    for method in ("mpvo", "mpvonc"):
+    for method in ("mpvo", "mpvonc", "xmpvo"):
         assert method in SORTERS and method in SORT_METHODS
         assert RenderSettings(sort=method).sort == method
     mesh = synthetic.cube(2)

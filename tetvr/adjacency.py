@@ -58,6 +58,10 @@ class FaceAdjacency:
     n_boundary_faces : faces on one tet only (including non-manifold ones).
     n_nonmanifold_faces : distinct faces held by more than two tets (left unpaired).
     cell_size : median longest edge of the tets, a length scale for heuristics.
+    convex : whether the mesh fills a convex region: its boundary is one closed,
+        connected, manifold surface, convex at every edge (then it is convex
+        everywhere, Tietze 1928), so MPVO's order is exact from every viewpoint and
+        rays through the boundary (:mod:`tetvr.boundary`) add nothing.
 
     Examples
     --------
@@ -79,6 +83,7 @@ class FaceAdjacency:
     n_boundary_faces: int
     n_nonmanifold_faces: int
     cell_size: float
+    convex: bool = False
 
 
 # Keyed on the identity of the (points, tets) arrays rather than on the mesh, so that
@@ -202,6 +207,7 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
     for arr in (neighbors, mates, normals, offsets, origin):
         arr.setflags(write=False)
     n_interior = int(first.size)
+    convex = n_nonmanifold == 0 and _convex_boundary(tets, rel, mates.reshape(-1), normals, offsets, cell_size)
     return FaceAdjacency(
         neighbors=neighbors,
         mates=mates,
@@ -213,4 +219,53 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
         n_boundary_faces=4 * m - 2 * n_interior,
         n_nonmanifold_faces=n_nonmanifold,
         cell_size=cell_size,
+        convex=convex,
     )
+
+
+def _convex_boundary(tets: NDArray[np.int64], rel: NDArray[np.float64], flat_mates: NDArray[np.int32],
+                     normals: NDArray[np.float64], offsets: NDArray[np.float64], cell_size: float) -> bool:
+    """Whether the boundary faces form one closed connected surface, convex at every edge.
+
+    Each boundary edge must be held by exactly two boundary faces, and the far vertex of
+    each must lie on or behind the other's plane (within a rounding tolerance relative to
+    the cell size). Connectivity is checked by propagating the smallest face label across
+    shared edges, with pointer jumping, to a fixed point.
+    """
+    slots = np.flatnonzero(flat_mates < 0)
+    if slots.size < 4:
+        return False
+    cells, k = slots >> 2, slots & 3
+    verts = tets[cells[:, None], FACE_VERTICES[k]]  # (F, 3)
+    n_f = slots.size
+    # The three edges of every boundary face, as (face, sorted vertex pair, far vertex).
+    ea = np.concatenate([verts[:, 0], verts[:, 1], verts[:, 2]])
+    eb = np.concatenate([verts[:, 1], verts[:, 2], verts[:, 0]])
+    far = np.concatenate([verts[:, 2], verts[:, 0], verts[:, 1]])
+    face = np.tile(np.arange(n_f), 3)
+    lo, hi = np.minimum(ea, eb), np.maximum(ea, eb)
+    order = np.lexsort((hi, lo))
+    lo, hi, far, face = lo[order], hi[order], far[order], face[order]
+    same = (lo[1:] == lo[:-1]) & (hi[1:] == hi[:-1])
+    # Closed manifold surface: the edges come in exactly two copies.
+    if lo.size % 2 or not np.all(same[0::2]) or np.any(same[1::2]):
+        return False
+    f, g = face[0::2], face[1::2]
+    far_f, far_g = far[0::2], far[1::2]
+    n = normals.reshape(-1, 3)[slots]
+    d = offsets.reshape(-1)[slots]
+    tol = 1e-9 * max(cell_size, 1e-300)
+    if np.any(np.einsum("ij,ij->i", n[f], rel[far_g]) - d[f] > tol):
+        return False
+    if np.any(np.einsum("ij,ij->i", n[g], rel[far_f]) - d[g] > tol):
+        return False
+    label = np.arange(n_f)
+    while True:
+        low = np.minimum(label[f], label[g])
+        new = label.copy()
+        np.minimum.at(new, f, low)
+        np.minimum.at(new, g, low)
+        new = new[new]  # pointer jumping
+        if np.array_equal(new, label):
+            return bool(np.all(label == 0))
+        label = new

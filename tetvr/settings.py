@@ -12,7 +12,7 @@ from .optics import OPTICS
 __all__ = ["RenderSettings", "SORT_METHODS", "TABLE_ENCODINGS", "TABLE_DTYPES"]
 
 #: Visibility orderings (see :mod:`tetvr.sort`).
-SORT_METHODS = ("auto", "centroid", "mpvo", "mpvonc", "none")
+SORT_METHODS = ("auto", "centroid", "mpvo", "mpvonc", "xmpvo", "none")
 #: How the pre-integration table is stored and looked up (see :mod:`tetvr.preintegrate`).
 TABLE_ENCODINGS = ("normalized", "premultiplied")
 TABLE_DTYPES = ("float32", "uint8")
@@ -28,12 +28,15 @@ class RenderSettings:
 
     Parameters
     ----------
-    sort : visibility order of the cells: ``"auto"`` (default: ``"mpvonc"`` up to 100k
-        cells, where it costs little next to drawing, ``"centroid"`` beyond), ``"centroid"`` (back to front by centroid
-        distance; fast, wrong where large cells overlap small ones), ``"mpvo"`` (Williams'
-        MPVO: exact for convex meshes), ``"mpvonc"`` (MPVO with Williams' non-convex
-        heuristic; cycles are broken and counted) or ``"none"`` (input order; only for
-        measurements).
+    sort : visibility order of the cells: ``"auto"`` (default: up to 100k cells, where a
+        graph sort costs little next to drawing, ``"mpvonc"`` for convex meshes and
+        ``"xmpvo"`` for the others; ``"centroid"`` beyond), ``"centroid"`` (back to front
+        by centroid distance; fast, wrong where large cells overlap small ones),
+        ``"mpvo"`` (Williams' MPVO: exact for convex meshes), ``"mpvonc"`` (MPVO with
+        Williams' non-convex heuristic; cycles are broken and counted), ``"xmpvo"``
+        (MPVONC plus edges from rays through the boundary, right between separate and
+        interlocking parts; see :mod:`tetvr.boundary`) or ``"none"`` (input order; only
+        for measurements).
     table_scalar_bins : N, samples of the scalar axis of the pre-integration table.
     table_thickness_slices : K, thickness slices on the logarithmic axis.
     table_log_base : ratio between consecutive thickness slices.
@@ -63,7 +66,7 @@ class RenderSettings:
     128
     """
 
-    sort: Literal["auto", "centroid", "mpvo", "mpvonc", "none"] = "auto"
+    sort: Literal["auto", "centroid", "mpvo", "mpvonc", "xmpvo", "none"] = "auto"
     table_scalar_bins: int = 256
     table_thickness_slices: int = 16
     table_log_base: float = 2.0

@@ -6,6 +6,9 @@ Bounds (PSNR on premultiplied RGB):
 - ``edge_on``: pixel centres lying exactly on a silhouette edge whose face contains the
   view direction have a finite chord in the reference and no coverage under GL's
   top-left rule (a measure-zero set that the symmetric setup hits); still >= 40 dB.
+- ``interlocking_rings``: 70 dB. The default sort for this non-convex mesh is ``xmpvo``,
+  whose boundary rays order the two rings wherever they overlap, so what remains is the
+  table's error (82 dB measured); centroid order and MPVONC give about 58 dB here.
 - ``transparent_tf``: exactly zero. ``opaque_tf``: alpha reaches 1 - 1e-6 per unit distance.
 The weaker method variants' errors on the same cases are measured, not asserted, by
 ``bench/speed_accuracy.py``.
@@ -27,7 +30,7 @@ from ..conftest import save_failure
 pytestmark = pytest.mark.gl
 
 SIZE = (96, 96)
-MIN_PSNR = {name: 40.0 for name in CASES}
+MIN_PSNR = {name: 40.0 for name in CASES} | {"interlocking_rings": 70.0}
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
