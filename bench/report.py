@@ -18,7 +18,8 @@ def main(argv: list[str]) -> int:
     scenes = r["scenes"]
     names = list(r["variants"])
     print(f"Speed against accuracy at {r['size'][0]}x{r['size'][1]} on {r.get('gl', {}).get('GL_RENDERER', '?')} "
-          f"({r['created']}): PSNR in dB against the reference / frame CPU time in ms; **bold**: on the Pareto front.\n")
+          f"({r['created']}): PSNR in dB against the reference / frame CPU time in ms / table build in s; "
+          "**bold**: on the Pareto front of frame time and error; *(t)*: on the front of frame time, table time and error.\n")
     print("| variant | " + " | ".join(f"{s} ({d['n_tets']} tets)" for s, d in scenes.items()) + " |")
     print("|---|" + "---|" * len(scenes))
     for key in names:
@@ -29,14 +30,18 @@ def main(argv: list[str]) -> int:
                 cells.append("–")
                 continue
             cell = f"{v['psnr']:.1f} / {v['frame_s'] * 1e3:.0f}"
-            cells.append(f"**{cell}**" if v["pareto"] else cell)
+            if "table_s" in v:
+                cell += f" / {v['table_s']:.2f}"
+            cell = f"**{cell}**" if v["pareto"] else cell
+            cells.append(cell + (" *(t)*" if v.get("pareto_with_table") else ""))
         print(f"| {key} | " + " | ".join(cells) + " |")
     print("\nHAPT metrics (max error, mean error over covered pixels, % of covered pixels off by > 1/255):\n")
-    print("| scene | " + " | ".join(k for k in ("default", "sort=mpvonc", "sort=none") if k in names) + " |")
-    print("|---|" + "---|" * 3)
+    hapt = [k for k in ("default", "sort=centroid", "sort=mpvonc", "sort=xmpvo", "sort=none") if k in names]
+    print("| scene | " + " | ".join(hapt) + " |")
+    print("|---|" + "---|" * len(hapt))
     for s, d in scenes.items():
         cells = []
-        for k in ("default", "sort=mpvonc", "sort=none"):
+        for k in hapt:
             v = d["variants"].get(k)
             if v is not None:
                 cells.append(f"{v['max_error']:.3f}, {v['mean_error']:.5f}, {v['pct_over_1_255']:.2f} %")

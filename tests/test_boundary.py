@@ -94,7 +94,7 @@ def test_cyclic_overlap_between_parts_is_broken_and_counted():
     c = boundary_constraints(mesh, cam, grid=128)
     assert c.behind.size == 3  # one edge per crossing, around the cycle
     assert sorted(c.behind.tolist()) == [0, 1, 2] and sorted(c.front.tolist()) == [0, 1, 2]
-    ids, stats = sort_with_stats(mesh, cam, "xmpvo")
+    ids, stats = xmpvo_order(mesh, cam, grid=128)
     assert sorted(ids.tolist()) == [0, 1, 2]
     assert stats.n_cycle_breaks == 1 and stats.n_boundary_constraints == 3
 
@@ -128,7 +128,8 @@ def test_interlocking_rings_exact_with_xmpvo_and_not_by_centroid(renderer):
     assert value["mpvonc"] < value["xmpvo"] - 15.0
 
 
-def test_bad_grid():
+@pytest.mark.parametrize("grid", [1, 2.5, True, "64"])
+def test_bad_grid(grid):
     mesh = synthetic.cube(1)
     with pytest.raises(ValueError, match="grid must be an integer >= 2"):
-        boundary_constraints(mesh, Camera.fit(mesh), grid=1)
+        boundary_constraints(mesh, Camera.fit(mesh), grid=grid)

@@ -18,7 +18,8 @@ for every such pair on every pixel's ray, MPVO's topological sort becomes exact 
 acyclic mesh, convex or not.
 
 Here the rays are a ``grid x grid`` lattice of sample points over the projected boundary
-(not the image's pixels: the sort does not know the image size), and the boundary faces
+(not the image's pixels: the sort does not know the image size; by default the lattice
+grows with the number of boundary faces, see :func:`default_grid`), and the boundary faces
 are rasterised onto it in numpy: each face enumerates the lattice points in its screen
 bounding box, keeps those inside it (edge functions), and records the depth of its plane
 there. One ``lexsort`` by (ray, depth) then lines up every ray's hits. A pair of parts
@@ -42,11 +43,20 @@ from .adjacency import FACE_VERTICES, face_adjacency
 from .camera import Camera
 from .mesh import TetMesh
 
-__all__ = ["BoundaryConstraints", "boundary_constraints", "DEFAULT_GRID"]
+__all__ = ["BoundaryConstraints", "boundary_constraints", "default_grid"]
 
-#: Lattice points per side of the ray grid. 256 x 256 rays resolve gaps down to about
-#: 1/256 of the mesh's screen extent.
-DEFAULT_GRID = 256
+
+def default_grid(n_boundary_faces: int) -> int:
+    """Lattice points per side for a mesh with this many boundary faces: about 16 rays
+    per boundary face over the whole lattice, at least 64 and at most 256 per side.
+
+    A coarse mesh needs few rays (its parts overlap in large regions); 256 x 256 rays
+    resolve gaps down to about 1/256 of the mesh's screen extent and cost ~7 ms.
+
+    >>> default_grid(100), default_grid(1_728), default_grid(50_000)
+    (64, 166, 256)
+    """
+    return int(min(max(round(math.sqrt(16.0 * n_boundary_faces)), 64), 256))
 
 #: At most this many (face, lattice point) candidate pairs are tested at once, to bound
 #: the memory of the rasterisation (about 100 bytes per pair).
@@ -74,14 +84,15 @@ class BoundaryConstraints:
     grid: int
 
 
-def boundary_constraints(mesh: TetMesh, camera: Camera, *, grid: int = DEFAULT_GRID) -> BoundaryConstraints:
+def boundary_constraints(mesh: TetMesh, camera: Camera, *, grid: int | None = None) -> BoundaryConstraints:
     """Ordering edges between cells that a ray leaves and next enters through the boundary.
 
     Parameters
     ----------
     mesh : the mesh; its face adjacency is built once and cached.
     camera : eye point (perspective) or view direction (parallel) of the view.
-    grid : lattice points per side of the ray grid (>= 2).
+    grid : lattice points per side of the ray grid (>= 2); by default
+        :func:`default_grid` of the mesh's boundary faces.
 
     Examples
     --------
@@ -95,10 +106,12 @@ def boundary_constraints(mesh: TetMesh, camera: Camera, *, grid: int = DEFAULT_G
     >>> [(int(x), int(y)) for x, y in zip(c.behind, c.front)]  # cell 1 (farther) first
     [(1, 0)]
     """
-    if not (isinstance(grid, (int, np.integer)) and grid >= 2):
+    adj = face_adjacency(mesh)
+    if grid is None:
+        grid = default_grid(adj.n_boundary_faces)
+    if not (isinstance(grid, (int, np.integer)) and not isinstance(grid, bool) and grid >= 2):
         raise ValueError(f"grid must be an integer >= 2, got {grid!r}")
     grid = int(grid)
-    adj = face_adjacency(mesh)
     slots = np.flatnonzero(adj.mates.reshape(-1) < 0)
     cells = slots >> 2
     verts = mesh.tets[cells[:, None], FACE_VERTICES[slots & 3]]  # (F, 3)

@@ -60,7 +60,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .adjacency import FaceAdjacency, face_adjacency
-from .boundary import DEFAULT_GRID, BoundaryConstraints, boundary_constraints
+from .boundary import BoundaryConstraints, boundary_constraints
 from .camera import Camera
 from .mesh import TetMesh
 
@@ -369,15 +369,15 @@ def mpvonc_order(
 
 
 def xmpvo_order(
-    mesh: TetMesh, camera: Camera, *, grid: int = DEFAULT_GRID, depth_window: float | None = None
+    mesh: TetMesh, camera: Camera, *, grid: int | None = None, depth_window: float | None = None
 ) -> tuple[NDArray[np.uint32], SortStats]:
     """MPVONC with edges between cells that share no face, from rays through the boundary.
 
     The XMPVO idea (Silva, Mitchell & Williams 1998): where a ray leaves the mesh through
     one cell and enters it again through another, the second is behind the first. With
     those edges the order is right between separate or interlocking parts and across
-    cavities, wherever the ``grid x grid`` rays see the overlap (see
-    :mod:`tetvr.boundary`); elsewhere it is MPVONC's.
+    cavities, wherever the ``grid x grid`` rays see the overlap (by default 64 to 256 per
+    side, growing with the boundary; see :mod:`tetvr.boundary`); elsewhere it is MPVONC's.
 
     Examples
     --------
