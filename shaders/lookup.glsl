@@ -11,18 +11,22 @@
 
 uniform sampler3D u_table;
 uniform vec2 u_scalar_range;   // scalars of the first and last table node
-uniform float u_alpha_scale;   // stored A * u_alpha_scale = extinction (uint8 tables)
+uniform float u_optical_scale; // stored A * u_optical_scale = extinction / ln 2 (for exp2)
 uniform vec3 u_table_size;     // (N, N, K + 1)
 uniform vec4 u_lookup;         // scalar -> texel coordinate (scale, offset), its clamp (lo, hi)
-uniform vec3 u_slices;         // 1 / d_min, 1 / log2(base), K (the last slice)
+uniform vec4 u_slices;         // x = d / d_min -> texture z: 1 / d_min, then for x < 1: z = x * y + z,
+uniform vec2 u_slices_log;     // else z = log2(x) * u_slices.w + u_slices_log.x; z <= u_slices_log.y
 
 vec4 lookup_segment(float sf, float sb, float d) {
     // Node i sits at texel centre (i + 0.5) / N.
     vec2 st = clamp(vec2(sf, sb) * u_lookup.x + u_lookup.y, u_lookup.z, u_lookup.w);
+    // Slice 0 is zero thickness, slice k >= 1 is d_min * base^(k - 1), linear below d_min;
+    // z is the texture coordinate of the fractional slice, (slice + 0.5) / (K + 1).
     float x = d * u_slices.x;
-    float slice = clamp(x < 1.0 ? x : 1.0 + log2(x) * u_slices.y, 0.0, u_slices.z);
+    float z = min(x < 1.0 ? x * u_slices.y + u_slices.z : log2(x) * u_slices.w + u_slices_log.x, u_slices_log.y);
 #if defined(TABLE_CUBIC) && TABLE_CUBIC
     // Catmull-Rom along the thickness axis: four slices, each read at its texel centre.
+    float slice = z * u_table_size.z - 0.5;
     float k0 = floor(slice), f = slice - k0;
     vec4 w = 0.5 * vec4(((-f + 2.0) * f - 1.0) * f, (3.0 * f - 5.0) * f * f + 2.0,
                         ((-3.0 * f + 4.0) * f + 1.0) * f, (f - 1.0) * f * f);
@@ -33,11 +37,11 @@ vec4 lookup_segment(float sf, float sb, float d) {
     }
     t = max(t, 0.0);
 #else
-    vec4 t = textureLod(u_table, vec3(st, (slice + 0.5) / u_table_size.z), 0.0);
+    vec4 t = textureLod(u_table, vec3(st, z), 0.0);
 #endif
 #if TABLE_NORMALIZED
     t.rgb = min(t.rgb, 1.0);
-    float alpha = 1.0 - exp(-d * t.a * u_alpha_scale);
+    float alpha = 1.0 - exp2(-d * t.a * u_optical_scale);
     return vec4(t.rgb * alpha, alpha);
 #else
     return vec4(min(t.rgb, vec3(t.a)), min(t.a, 1.0));

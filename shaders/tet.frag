@@ -18,6 +18,7 @@ noperspective in vec4 v_segment;
 flat in int v_exact_tet;
 
 uniform vec2 u_viewport;  // width, height in pixels
+uniform vec4 u_pixel_xy;  // gl_FragCoord.xy * xy + zw = eye-space x/depth, y/depth of the pixel's ray
 
 out vec4 f_color;
 
@@ -71,7 +72,7 @@ void main() {
 #if PERSPECTIVE_CORRECT
     zf = 1.0 / zf; sf *= zf; zb = 1.0 / zb; sb *= zb;
 #endif
-    vec2 xy = (gl_FragCoord.xy / u_viewport * 2.0 - 1.0) / vec2(u_proj[0][0], u_proj[1][1]);
+    vec2 xy = gl_FragCoord.xy * u_pixel_xy.xy + u_pixel_xy.zw;
     float per_depth = sqrt(1.0 + dot(xy, xy));
 #else
     const float per_depth = 1.0;

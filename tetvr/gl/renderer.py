@@ -287,7 +287,8 @@ class Renderer:
         near, far = camera.clipping_range
         return dict(u_view=view, u_proj=camera.projection_matrix(size[0] / size[1]),
                     u_perspective=0 if camera.parallel_projection else 1, u_near=near, u_far=far,
-                    u_viewport=(float(size[0]), float(size[1])))
+                    u_viewport=(float(size[0]), float(size[1])),
+                    u_pixel_xy=_pixel_xy(camera, size))
 
     def _classify(self, n_tets: int, uniforms: dict[str, Any]) -> None:
         """Run classify.comp over the tets in the tets buffer."""
@@ -448,6 +449,14 @@ class Renderer:
         front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)
         back = np.where(ext[..., 1] >= 3e38, -np.inf, -ext[..., 1]).astype(np.float32)
         return front, back
+
+
+def _pixel_xy(camera: Camera, size: tuple[int, int]) -> tuple[float, float, float, float]:
+    """(a, b, c, d) with ``gl_FragCoord.xy * (a, b) + (c, d)`` = the eye-space x and y per
+    unit depth of the pixel's ray (perspective), i.e. NDC divided by the projection's scale."""
+    proj = camera.projection_matrix(size[0] / size[1])
+    sx, sy = float(proj[0, 0]), float(proj[1, 1])
+    return 2.0 / (size[0] * sx), 2.0 / (size[1] * sy), -1.0 / sx, -1.0 / sy
 
 
 def _outside_clipping_range(mesh: TetMesh, camera: Camera) -> tuple[bool, bool]:
