@@ -359,13 +359,7 @@ def mpvonc_order(
     >>> ids.shape, stats.n_cycle_breaks
     ((162,), 0)
     """
-    if depth_window is None:
-        window = 2.0 * face_adjacency(mesh).cell_size
-    else:
-        window = float(depth_window)
-        if not window >= 0:
-            raise ValueError(f"depth_window must be >= 0, got {depth_window!r}")
-    return _graph_order(mesh, camera, "mpvonc", window)
+    return _graph_order(mesh, camera, "mpvonc", _window(mesh, depth_window))
 
 
 def xmpvo_order(
@@ -387,13 +381,18 @@ def xmpvo_order(
     >>> stats.n_boundary_constraints > 0
     True
     """
+    return _graph_order(mesh, camera, "xmpvo", _window(mesh, depth_window),
+                        boundary_constraints(mesh, camera, grid=grid))
+
+
+def _window(mesh: TetMesh, depth_window: float | None) -> float:
+    """The depth window of a step: ``depth_window``, or twice the median longest edge."""
     if depth_window is None:
-        window = 2.0 * face_adjacency(mesh).cell_size
-    else:
-        window = float(depth_window)
-        if not window >= 0:
-            raise ValueError(f"depth_window must be >= 0, got {depth_window!r}")
-    return _graph_order(mesh, camera, "xmpvo", window, boundary_constraints(mesh, camera, grid=grid))
+        return 2.0 * face_adjacency(mesh).cell_size
+    window = float(depth_window)
+    if not window >= 0:
+        raise ValueError(f"depth_window must be >= 0, got {depth_window!r}")
+    return window
 
 
 def _input_order(mesh: TetMesh, camera: Camera) -> NDArray[np.uint32]:
