@@ -55,7 +55,7 @@ def variants() -> dict[str, RenderSettings]:
     v["uint8 framebuffer"] = dataclasses.replace(DEFAULT, framebuffer="uint8")
     for n in (64, 128, 512):
         v[f"N={n}"] = dataclasses.replace(DEFAULT, table_scalar_bins=n)
-    for k, base in ((8, 4.0), (14, 2.2), (24, 1.6)):
+    for k, base in ((8, 2.5), (16, 2.0), (24, 1.4)):
         v[f"K={k}, base {base}"] = dataclasses.replace(DEFAULT, table_thickness_slices=k, table_log_base=base)
     for method in SORTERS:
         if method not in (DEFAULT.sort, "auto") and method in SORT_METHODS:

@@ -39,7 +39,11 @@ class RenderSettings:
         for measurements).
     table_scalar_bins : N, samples of the scalar axis of the pre-integration table.
     table_thickness_slices : K, thickness slices on the logarithmic axis.
-    table_log_base : ratio between consecutive thickness slices.
+    table_log_base : ratio between consecutive thickness slices. The default 1.6 puts
+        K = 16 slices over thicknesses from d_max / 1150 to d_max; measured against the
+        reference it beats base 2 (a 33000x span) by up to 8 dB where colour changes
+        along thick opaque segments, and matches K = 24 slices at base 1.6 everywhere
+        (``bench/speed_accuracy.py``).
     table_dtype : ``"float32"`` or ``"uint8"`` storage of the table.
     table_encoding : ``"normalized"`` stores colour/alpha and optical depth per unit
         length, so that alpha is exact in the thickness and only the (slowly varying)
@@ -69,7 +73,7 @@ class RenderSettings:
     sort: Literal["auto", "centroid", "mpvo", "mpvonc", "xmpvo", "none"] = "auto"
     table_scalar_bins: int = 256
     table_thickness_slices: int = 16
-    table_log_base: float = 2.0
+    table_log_base: float = 1.6
     table_dtype: Literal["float32", "uint8"] = "float32"
     table_encoding: Literal["normalized", "premultiplied"] = "normalized"
     table_filter: Literal["linear", "cubic"] = "linear"
