@@ -8,7 +8,7 @@ Bounds (PSNR on premultiplied RGB):
   top-left rule (a measure-zero set that the symmetric setup hits); still >= 40 dB.
 - ``interlocking_rings``: 70 dB. The default sort for this non-convex mesh is ``xmpvo``,
   whose boundary rays order the two rings wherever they overlap, so what remains is the
-  table's error (82 dB measured); centroid order and MPVONC give about 58 dB here.
+  table's error (89 dB measured); centroid order and MPVONC give about 58 dB here.
 - ``transparent_tf``: exactly zero. ``opaque_tf``: alpha reaches 1 - 1e-6 per unit distance.
 The weaker method variants' errors on the same cases are measured, not asserted, by
 ``bench/speed_accuracy.py``.
