@@ -106,10 +106,10 @@ def test_write_frames_and_video(tmp_path, small):
     (tmp_path / "file").write_text("x")
     with pytest.raises(ValueError, match="not a folder"):
         write_frames(images, tmp_path / "file")
-    imageio = pytest.importorskip("imageio.v2")
+    imageio = pytest.importorskip("imageio.v2", reason="GIF/MP4 output needs the animate extra (pip install tetvr[animate])")
     gif = write_frames(images, tmp_path / "orbit.gif", fps=5)[0]
     assert len(imageio.mimread(gif)) == 3
-    pytest.importorskip("imageio_ffmpeg")
+    pytest.importorskip("imageio_ffmpeg", reason="MP4 output needs imageio-ffmpeg (pip install tetvr[animate])")
     mp4 = write_frames(images, tmp_path / "orbit.mp4", fps=5)[0]
     reader = imageio.get_reader(mp4)
     assert reader.count_frames() == 3

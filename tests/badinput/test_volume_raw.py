@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-volume = pytest.importorskip("tetvr.volume")
+from tetvr import volume
 
 
 @pytest.fixture
