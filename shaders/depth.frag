@@ -11,8 +11,6 @@
 noperspective in vec4 v_segment;
 flat in int v_exact_tet;
 
-uniform vec2 u_viewport;
-
 out vec2 f_extent;
 
 void main() {

@@ -3,7 +3,7 @@
 // 3D pre-integration table (Kraus et al. 2004), and emits premultiplied RGBA for
 // back-to-front "over" blending (ONE, ONE_MINUS_SRC_ALPHA) into an RGBA32F target.
 //
-// In:  v_segment, v_exact_tet (see tet.vert); u_near, u_far, u_viewport.
+// In:  v_segment, v_exact_tet (see tet.vert); u_near, u_far, u_pixel_xy.
 // Out: f_color, premultiplied.
 // The segment is clipped to the near and far planes here, per fragment, so tets that
 // cross them are cut rather than dropped. Defines (one program per combination):
@@ -17,8 +17,9 @@
 noperspective in vec4 v_segment;
 flat in int v_exact_tet;
 
-uniform vec2 u_viewport;  // width, height in pixels
-uniform vec4 u_pixel_xy;  // gl_FragCoord.xy * xy + zw = eye-space x/depth, y/depth of the pixel's ray
+// gl_FragCoord.xy * xy + zw = NDC over the projection's scale: eye-space x/depth, y/depth
+// of the pixel's ray in perspective, its eye-space x, y in parallel projection.
+uniform vec4 u_pixel_xy;
 
 out vec4 f_color;
 
@@ -33,10 +34,12 @@ void exact_segment(int tet) {
         p[k] = (u_view * vec4(q.xyz, 1.0)).xyz;
         s[k] = q.w;
     }
-    vec2 ndc = gl_FragCoord.xy / u_viewport * 2.0 - 1.0;
-    vec2 xy = ndc / vec2(u_proj[0][0], u_proj[1][1]);
-    vec3 o = u_perspective == 1 ? vec3(0.0) : vec3(xy, 0.0);
-    vec3 d = u_perspective == 1 ? vec3(xy, -1.0) : vec3(0.0, 0.0, -1.0);
+    vec2 xy = gl_FragCoord.xy * u_pixel_xy.xy + u_pixel_xy.zw;
+#if PERSPECTIVE
+    vec3 o = vec3(0.0), d = vec3(xy, -1.0);
+#else
+    vec3 o = vec3(xy, 0.0), d = vec3(0.0, 0.0, -1.0);
+#endif
     float t0 = u_near, t1 = u_far;
     for (int k = 0; k < 4; ++k) {
         vec3 a = p[(k + 1) & 3], b = p[(k + 2) & 3], c = p[(k + 3) & 3];

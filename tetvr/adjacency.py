@@ -58,6 +58,8 @@ class FaceAdjacency:
     n_boundary_faces : faces on one tet only (including non-manifold ones).
     n_nonmanifold_faces : distinct faces held by more than two tets (left unpaired).
     cell_size : median longest edge of the tets, a length scale for heuristics.
+    boundary_slots : (F,) int64 flat slots ``4 * t + k`` of the boundary faces.
+    boundary_faces : (F, 3) vertex ids of those faces (``FACE_VERTICES`` of each slot).
     convex : whether the mesh fills a convex region: its boundary is one closed,
         connected, manifold surface, convex at every edge (then it is convex
         everywhere, Tietze 1928), so MPVO's order is exact from every viewpoint and
@@ -83,6 +85,8 @@ class FaceAdjacency:
     n_boundary_faces: int
     n_nonmanifold_faces: int
     cell_size: float
+    boundary_slots: NDArray[np.int64]
+    boundary_faces: NDArray[np.int64]
     convex: bool = False
 
 
@@ -207,7 +211,11 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
     for arr in (neighbors, mates, normals, offsets, origin):
         arr.setflags(write=False)
     n_interior = int(first.size)
-    convex = n_nonmanifold == 0 and _convex_boundary(tets, rel, mates.reshape(-1), normals, offsets, cell_size)
+    boundary_slots = np.flatnonzero(mates.reshape(-1) < 0)
+    boundary_faces = tets[boundary_slots[:, None] >> 2, FACE_VERTICES[boundary_slots & 3]]
+    for arr in (boundary_slots, boundary_faces):
+        arr.setflags(write=False)
+    convex = n_nonmanifold == 0 and _convex_boundary(boundary_slots, boundary_faces, rel, normals, offsets, cell_size)
     return FaceAdjacency(
         neighbors=neighbors,
         mates=mates,
@@ -219,11 +227,13 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
         n_boundary_faces=4 * m - 2 * n_interior,
         n_nonmanifold_faces=n_nonmanifold,
         cell_size=cell_size,
+        boundary_slots=boundary_slots,
+        boundary_faces=boundary_faces,
         convex=convex,
     )
 
 
-def _convex_boundary(tets: NDArray[np.int64], rel: NDArray[np.float64], flat_mates: NDArray[np.int32],
+def _convex_boundary(slots: NDArray[np.int64], verts: NDArray[np.int64], rel: NDArray[np.float64],
                      normals: NDArray[np.float64], offsets: NDArray[np.float64], cell_size: float) -> bool:
     """Whether the boundary faces form one closed connected surface, convex at every edge.
 
@@ -232,11 +242,8 @@ def _convex_boundary(tets: NDArray[np.int64], rel: NDArray[np.float64], flat_mat
     the cell size). Connectivity is checked by propagating the smallest face label across
     shared edges, with pointer jumping, to a fixed point.
     """
-    slots = np.flatnonzero(flat_mates < 0)
     if slots.size < 4:
         return False
-    cells, k = slots >> 2, slots & 3
-    verts = tets[cells[:, None], FACE_VERTICES[k]]  # (F, 3)
     n_f = slots.size
     # The three edges of every boundary face, as (face, sorted vertex pair, far vertex).
     ea = np.concatenate([verts[:, 0], verts[:, 1], verts[:, 2]])

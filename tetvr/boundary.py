@@ -20,9 +20,10 @@ acyclic mesh, convex or not.
 Here the rays are a ``grid x grid`` lattice of sample points over the projected boundary
 (not the image's pixels: the sort does not know the image size; by default the lattice
 grows with the number of boundary faces, see :func:`default_grid`), and the boundary faces
-are rasterised onto it in numpy: each face enumerates the lattice points in its screen
-bounding box, keeps those inside it (edge functions), and records the depth of its plane
-there. One ``lexsort`` by (ray, depth) then lines up every ray's hits. A pair of parts
+are scan-converted onto it in numpy: each face, row by lattice row, gives the span of
+lattice columns inside its three edges, and records the depth of its plane at each of
+them. Rays that cannot leave and re-enter (fewer than two entries or exits) are dropped,
+and one sort by (ray, depth) lines up the remaining rays' hits. A pair of parts
 that overlap on screen only between lattice points gets no edge and keeps the depth
 heuristic, so the lattice should be finer than the smallest gap that matters.
 
@@ -39,7 +40,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from .adjacency import FACE_VERTICES, face_adjacency
+from .adjacency import face_adjacency
 from .camera import Camera
 from .mesh import TetMesh
 
@@ -57,10 +58,6 @@ def default_grid(n_boundary_faces: int) -> int:
     (64, 166, 256)
     """
     return int(min(max(round(math.sqrt(16.0 * n_boundary_faces)), 64), 256))
-
-#: At most this many (face, lattice point) candidate pairs are tested at once, to bound
-#: the memory of the rasterisation (about 100 bytes per pair).
-_PAIR_BLOCK = 2_000_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,30 +109,24 @@ def boundary_constraints(mesh: TetMesh, camera: Camera, *, grid: int | None = No
     if not (isinstance(grid, (int, np.integer)) and not isinstance(grid, bool) and grid >= 2):
         raise ValueError(f"grid must be an integer >= 2, got {grid!r}")
     grid = int(grid)
-    slots = np.flatnonzero(adj.mates.reshape(-1) < 0)
+    slots = adj.boundary_slots
     cells = slots >> 2
-    verts = mesh.tets[cells[:, None], FACE_VERTICES[slots & 3]]  # (F, 3)
+    verts = adj.boundary_faces
 
-    # Eye space: camera at the origin looking down -z.
+    # Eye space: camera at the origin looking down -z. The outward unit normals are the
+    # face adjacency's, turned into eye space.
     view = camera.view_matrix()
     eye_pts = mesh.points @ view[:3, :3].T + view[:3, 3]
     p = eye_pts[verts]  # (F, 3, 3)
-    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    # Outward: away from the cell's fourth vertex.
-    opposite = eye_pts[mesh.tets[cells, slots & 3]]
-    flip = np.einsum("ij,ij->i", n, opposite - p[:, 0]) > 0
-    n[flip] = -n[flip]
+    n = adj.normals.reshape(-1, 3)[slots] @ view[:3, :3].T
     c = np.einsum("ij,ij->i", n, p[:, 0])  # plane: n . x = c
-    scale = np.linalg.norm(n, axis=1) * (np.abs(p).max(axis=(1, 2)) + 1e-300)
     if camera.parallel_projection:
         facing = n[:, 2]  # > 0: the outward normal points at the eye (toward +z)
-        tol = 1e-9 * np.linalg.norm(n, axis=1)
-        ok = np.abs(facing) > tol
+        ok = np.abs(facing) > 1e-9
     else:
         facing = -c  # n . (eye - x) with the eye at the origin
-        tol = 1e-9 * scale
         near = -p[:, :, 2].max(axis=1)  # smallest depth of the face's vertices
-        ok = (np.abs(facing) > tol) & (near > 1e-9 * np.abs(p).max())
+        ok = (np.abs(facing) > 1e-9 * (np.abs(p).max(axis=(1, 2)) + 1e-300)) & (near > 1e-9 * np.abs(p).max())
     n_skipped = int(np.count_nonzero(~ok))
     p, n, c, cells, entering = p[ok], n[ok], c[ok], cells[ok], facing[ok] > 0
     empty = np.empty(0, dtype=np.int64)

@@ -24,8 +24,10 @@ unchanged bit for bit (``tests/test_cull.py``); the exact reference renderer nee
 margin. With ``table_encoding="premultiplied"`` the table's colour can keep a rounding
 residue (~1e-17) where its alpha is zero, so there culling is exact only to that.
 
-Until the renderer takes a cell subset, :func:`submesh` builds a mesh of the visible
-cells that renders like the whole (same points, scalars and table).
+The GPU renderer culls by itself (it draws a subset of the cells through its order).
+For renderers that take no subset, such as :func:`~tetvr.reference.render_reference`,
+:func:`submesh` builds a mesh of the visible cells that renders like the whole (same
+points, scalars and table).
 """
 
 from __future__ import annotations

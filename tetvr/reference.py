@@ -57,6 +57,7 @@ from typing import Callable, Iterator, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from .adjacency import FACE_VERTICES
 from .camera import Camera
 from .image import image_size
 from .mesh import TetMesh
@@ -82,7 +83,6 @@ DEFAULT_CHUNK = 1 << 18
 # drops a ray that touches the tet; the exact plane test then decides.
 _BOX_MARGIN_PX = 1e-6
 
-# Within a piece handed to integrate_pieces, 1 - opacity varies at most by this factor
 
 # Sub-pieces evaluated per integrate_pieces call: bounds its (n_sub, 6) temporaries.
 _SUB_BUDGET = 1 << 20
@@ -90,7 +90,7 @@ _SUB_BUDGET = 1 << 20
 # Faces opposite vertex k, as local indices in ascending order. Tet vertices are sorted
 # by id first, so a face shared by two tets is built from the same points in the same
 # order in both and its plane is bit-identical up to sign.
-_FACES = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+_FACES = FACE_VERTICES
 
 Float = NDArray[np.float64]
 Int = NDArray[np.int64]

@@ -92,14 +92,8 @@ def _radix_argsort_desc(key: NDArray[np.float32]) -> NDArray[np.uint32]:
 
 def centroid_order(mesh: TetMesh, camera: Camera) -> NDArray[np.uint32]:
     """Cell ids back to front by centroid (distance to the eye, or depth if parallel)."""
-    c = mesh.centroids
-    eye = np.asarray(camera.position)
-    if camera.parallel_projection:
-        key = (c - eye) @ np.asarray(camera.direction)
-    else:
-        diff = c - eye
-        key = np.einsum("ij,ij->i", diff, diff)  # squared distance orders the same
-    return _radix_argsort_desc(key.astype(np.float32))
+    # The squared distance orders the same and saves the square root.
+    return _radix_argsort_desc(_depth(mesh, camera, squared=True).astype(np.float32))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -168,12 +162,14 @@ def _face_graph(adj: FaceAdjacency, camera: Camera) -> tuple[NDArray[np.int32], 
     return front, clear
 
 
-def _depth(mesh: TetMesh, camera: Camera) -> NDArray[np.float64]:
-    """Distance of each centroid from the eye (perspective) or depth along the view axis."""
+def _depth(mesh: TetMesh, camera: Camera, *, squared: bool = False) -> NDArray[np.float64]:
+    """Distance of each centroid from the eye (perspective; its square if ``squared``) or
+    depth along the view axis (parallel)."""
     diff = mesh.centroids - np.asarray(camera.position)
     if camera.parallel_projection:
         return diff @ np.asarray(camera.direction)
-    return np.sqrt(np.einsum("ij,ij->i", diff, diff))
+    d2 = np.einsum("ij,ij->i", diff, diff)
+    return d2 if squared else np.sqrt(d2)
 
 
 # The four bytes of a row of `clear` read as one uint32: all True.
@@ -207,7 +203,7 @@ def _graph_order(mesh: TetMesh, camera: Camera, method: str, window: float,
         waits = np.bincount(extra.front, minlength=m).astype(np.int64)
         n_extra = int(extra.behind.size)
     else:
-        succ_ptr = pred_ptr = None
+        succ_ptr = pred_ptr = pred_list = None
         n_extra = 0
     # Each cell's sort key packs its nearness (distance from the farthest cell, float32,
     # whose bits order like the values since they are >= 0) above its id: one uint64
@@ -232,7 +228,7 @@ def _graph_order(mesh: TetMesh, camera: Camera, method: str, window: float,
     while pos < m:
         if ready.size == 0:
             cell, blocked_seen = _break_cycle(blocked_seen, drawn, clear, adj.neighbors, near,
-                                              waits, pred_ptr, pred_list if pred_ptr is not None else None)
+                                              waits, pred_ptr, pred_list)
             batch = np.array([cell], dtype=np.intp)
             breaks += 1
         else:
