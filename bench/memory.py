@@ -20,6 +20,8 @@ import sys
 import time
 from pathlib import Path
 
+from _common import machine
+
 ROOT = Path(__file__).resolve().parents[1]
 
 CHILD = r"""
@@ -70,8 +72,8 @@ def main(argv=None) -> int:
         print("interrupted: writing what was measured")
     outdir = Path(args.out)
     outdir.mkdir(parents=True, exist_ok=True)
-    report = {"created": time.strftime("%Y-%m-%dT%H:%M:%S"), "platform": platform.platform(), "rows": rows,
-              "reference": "EnSight: 100 MB of video memory per million tets"}
+    report = {"created": time.strftime("%Y-%m-%dT%H:%M:%S"), "platform": platform.platform(), "machine": machine(),
+              "rows": rows, "reference": "EnSight: 100 MB of video memory per million tets"}
     (outdir / "memory.json").write_text(json.dumps(report, indent=1))
     print(f"wrote {outdir / 'memory.json'}")
     return 0

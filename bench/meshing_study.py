@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import statistics
 import sys
 import time
@@ -38,6 +37,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from _common import loadavg, machine  # noqa: E402
 
 import tetvr  # noqa: E402
 from tetvr import Camera, TransferFunction, synthetic  # noqa: E402
@@ -87,7 +88,7 @@ def main() -> None:
     truth = render_reference(fine.mesh, camera, tf, size)
     print(f"  reference image of the fine mesh: {time.perf_counter() - t:.1f} s")
 
-    load_before = os.getloadavg()
+    load_before = loadavg()
     rows = []
     with tetvr.Renderer() as renderer:
         renderer.render(fine.mesh, camera, tf, size=size)  # compile and warm up
@@ -150,8 +151,8 @@ def main() -> None:
         "quantum_crossing": crossing,
         "verdict": verdict, "gl": gl,
         # llvmpipe renders on the CPU: other processes show up in the GPU times (see bench/README.md).
-        "machine": {"python": platform.python_version(), "platform": platform.platform(), "cpus": os.cpu_count(),
-                    "load_average_before": load_before, "load_average_after": os.getloadavg()},
+        "machine": {**machine(), "cpus": os.cpu_count(), "load_average_before": load_before,
+                    "load_average_after": loadavg()},
         "quick": args.quick,
     }
     (args.out / "meshing_study.json").write_text(json.dumps(out, indent=2, default=str))

@@ -22,12 +22,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from _common import SHARED_DATA  # noqa: E402
+
 import tetvr  # noqa: E402
 from tetvr import Camera, RaycastSettings, TransferFunction, Volume  # noqa: E402
 
 
 def volume() -> tuple[str, Volume]:
-    path = ROOT.parent / "shared" / "data" / "volumes" / "aneurism.vti"
+    path = SHARED_DATA / "volumes" / "aneurism.vti"
     if path.is_file():
         return "aneurism.vti", tetvr.read_volume(path)
     g = np.linspace(-1.0, 1.0, 256, dtype=np.float32)

@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import platform
 import statistics
 import sys
 import time
@@ -34,6 +33,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from _common import REAL_MESHES, TETS_DATA, load_quiet, machine  # noqa: E402
+
 import tetvr  # noqa: E402
 from tetvr import Camera, RenderSettings, TransferFunction, synthetic  # noqa: E402
 from tetvr.reference import render_reference  # noqa: E402
@@ -41,7 +42,6 @@ from tetvr.settings import SORT_METHODS  # noqa: E402
 from tetvr.sort import SORTERS  # noqa: E402
 from tetvr.stability import CASES, case  # noqa: E402
 
-SHARED = ROOT.parent / "shared" / "data" / "tets"
 DEFAULT = RenderSettings()
 
 
@@ -79,16 +79,14 @@ def scenes(quick: bool):
         _tf(r, [(0, 0.9), (1, 0.9)], 6)
     c = case("camera_inside")
     yield "camera inside", c.mesh, c.camera, c.tf
-    for name, field in (("bluntfin_tets.vtu", "Density"), ("combustor_tets.vtu", "Density")):
+    for name, field in REAL_MESHES:
         if quick and name.startswith("combustor"):
             continue
-        path = SHARED / name
+        path = TETS_DATA / name
         if not path.is_file():
             print(f"skipping {name}: {path} not found")
             continue
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            mesh = tetvr.read(path, field)
+        mesh = load_quiet(path, field)
         lo, hi = mesh.scalar_range
         q30, q60 = ((q - lo) / (hi - lo) for q in np.quantile(mesh.scalars, [0.3, 0.6]))
         op = [(0, 0.02), (q30 - 0.03, 0.05), (q30, 0.9), (q30 + 0.03, 0.05), (q60, 0.3), (1, 0.9)]
@@ -175,7 +173,7 @@ def main(argv=None) -> int:
 
     vs = variants()
     report = {"created": time.strftime("%Y-%m-%dT%H:%M:%S"), "size": size, "repeats": repeats,
-              "machine": {"platform": platform.platform(), "python": platform.python_version(), "numpy": np.__version__},
+              "machine": machine(),
               "variants": {k: dataclasses.asdict(s) for k, s in vs.items()}, "scenes": {}, "stability": {}}
     renderers = {}
     try:

@@ -28,20 +28,28 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import functools
-import json
 import os
-import platform
 import statistics
 import sys
 import time
-import warnings
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
+
+# Meshes (CUBE_NS, REAL_MESHES, QUICK_MAX_TETS), the data folder, JSON writing and machine info.
+from _common import (
+    CUBE_NS,
+    QUICK_MAX_TETS,
+    REAL_MESHES,
+    TETS_DATA,
+    load_quiet,
+    loadavg,
+    machine,
+    write_json,
+)
 from tqdm import tqdm
 
-import tetvr
 from tetvr import synthetic
 from tetvr.camera import Camera
 from tetvr.mesh import TetMesh
@@ -51,7 +59,7 @@ from tetvr.settings import RenderSettings
 from tetvr.sort import centroid_order
 
 REPO = Path(__file__).resolve().parents[1]
-DEFAULT_DATA = REPO.parent / "shared" / "data" / "tets"
+DEFAULT_DATA = TETS_DATA
 
 SIZE = (512, 512)
 #: Target size of the geometry-only floor (same draw, almost no fragments).
@@ -59,14 +67,9 @@ GEOMETRY_SIZE = (16, 16)
 OPACITY = 0.5
 #: Per-view stages, in pipeline order; their sum is the per-view frame total.
 VIEW_STAGES = ("classify", "sort", "order_upload", "draw", "readback")
-#: Synthetic cubes: cube(n) has 6 n^3 tets (~10k, 105k, 330k, 1M).
-CUBE_NS = (12, 26, 38, 55)
-#: Real meshes (file, point field), used when the data folder exists.
-REAL_MESHES = (("bluntfin_tets.vtu", "Density"), ("combustor_tets.vtu", "Density"))
 #: Meshes above this many tets get fewer repeats (a 1M-tet frame takes seconds on llvmpipe).
 BIG_TETS = 500_000
 BIG_REPEATS = 3
-QUICK_MAX_TETS = 330_000
 #: The renderer's defaults, with the sort pinned to the one the targets are about.
 SETTINGS = RenderSettings(sort="centroid")
 TABLE_BINS = (128, 256, 512)
@@ -97,56 +100,6 @@ def _label(n_tets: int) -> str:
     return f"{n_tets / 1e6:.2f}M" if n_tets >= 1e6 else f"{n_tets / 1e3:.0f}k"
 
 
-def _versions() -> dict[str, str]:
-    import moderngl
-
-    out = {"python": platform.python_version(), "numpy": np.__version__, "tetvr": tetvr.__version__,
-           "moderngl": getattr(moderngl, "__version__", "?")}
-    try:
-        import matplotlib
-
-        out["matplotlib"] = matplotlib.__version__
-    except ImportError:
-        out["matplotlib"] = "not installed"
-    return out
-
-
-def _machine() -> dict[str, Any]:
-    info: dict[str, Any] = {"cpu_count": os.cpu_count(), "platform": platform.platform(),
-                            "machine": platform.machine(), "processor": platform.processor()}
-    try:
-        info["cpu_affinity"] = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        pass
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                info["cpu_model"] = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    # llvmpipe's thread count follows these; record them so runs can be compared.
-    info["env"] = {k: os.environ[k] for k in ("LP_NUM_THREADS", "GALLIUM_DRIVER", "MESA_LOADER_DRIVER_OVERRIDE",
-                                              "EGL_PLATFORM", "OMP_NUM_THREADS") if k in os.environ}
-    info.update(_versions())
-    return info
-
-
-def _loadavg() -> list[float] | None:
-    # Other work on the same cores shows up as noise in every stage; keep a trace of it.
-    try:
-        return [round(x, 2) for x in os.getloadavg()]
-    except OSError:
-        return None
-
-
-def _write_json(path: Path, data: dict[str, Any]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=float) + "\n")
-    os.replace(tmp, path)  # never leave a half-written file behind
-
-
 def _mesh_specs(quick: bool, data_dir: Path) -> tuple[list[tuple[str, int, Callable[[], TetMesh]]], list[str]]:
     """(name, expected tets, loader) in ascending size, and notes about what was skipped."""
     specs: list[tuple[str, int, Callable[[], TetMesh]]] = []
@@ -160,13 +113,8 @@ def _mesh_specs(quick: bool, data_dir: Path) -> tuple[list[tuple[str, int, Calla
                 notes.append(f"skipped {fname}: not in {data_dir}")
                 continue
 
-            def load(path: Path = path, field: str = field) -> TetMesh:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")  # "dropped N zero-volume tetrahedra"
-                    return tetvr.read(path, field)
-
             # Size is unknown until read; the real meshes here are ~200k tets.
-            specs.append((f"{path.stem.removesuffix('_tets')} ({field})", -1, load))
+            specs.append((f"{path.stem.removesuffix('_tets')} ({field})", -1, functools.partial(load_quiet, path, field)))
     else:
         notes.append(f"skipped real meshes: {data_dir} does not exist")
     if quick:
@@ -499,7 +447,7 @@ def main(argv: list[str] | None = None) -> int:
         "command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
         "quick": args.quick, "size": list(SIZE), "opacity": OPACITY, "repeats": repeats,
         "big_mesh_repeats": {"above_tets": BIG_TETS, "repeats": min(repeats, BIG_REPEATS)},
-        "settings": SETTINGS.to_dict(), "machine": _machine(), "notes": notes, "loadavg_start": _loadavg(),
+        "settings": SETTINGS.to_dict(), "machine": machine(), "notes": notes, "loadavg_start": loadavg(),
         "meshes": [], "interrupted": False, "complete": False,
         "definitions": {
             "per_view_stages": list(VIEW_STAGES),
@@ -549,14 +497,14 @@ def main(argv: list[str] | None = None) -> int:
                 rec["load_s"] = load_s
                 res["meshes"].append(rec)
                 res["targets"] = evaluate_targets(res)
-                _write_json(json_path, res)
+                write_json(json_path, res)
                 if mesh.n_tets == 6 * SORT_N**3:
                     big_mesh = mesh
                 del mesh
         bar.set_description("table build")
         res["table"] = bench_tables(TABLE_REPEATS, bar)
         res["targets"] = evaluate_targets(res)
-        _write_json(json_path, res)
+        write_json(json_path, res)
         bar.set_description("centroid sort 1M")
         res["sort"] = bench_sort(big_mesh, SORT_REPEATS, bar)
         res["complete"] = True
@@ -566,8 +514,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         bar.close()
     res["targets"] = evaluate_targets(res)
-    res["loadavg_end"] = _loadavg()
-    _write_json(json_path, res)
+    res["loadavg_end"] = loadavg()
+    write_json(json_path, res)
     print_table(res)
     try:
         plot(res, png_path)

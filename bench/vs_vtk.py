@@ -42,12 +42,9 @@ import argparse
 import datetime as _dt
 import functools
 import json
-import os
-import platform
 import statistics
 import sys
 import time
-import warnings
 from pathlib import Path
 from typing import Any, Callable
 
@@ -65,10 +62,11 @@ from tetvr.render import default_transfer_function  # noqa: E402
 from tetvr.settings import RenderSettings  # noqa: E402
 from tetvr.vtkcompare import PARITY_SETTINGS, VTKProcess, orbit, quantize8, tile_images, vtk_status  # noqa: E402
 
-DEFAULT_DATA = ROOT.parent / "shared" / "data" / "tets"
-CUBE_NS = (12, 26, 38, 55)  # 10k, 105k, 329k, 998k tets
-REAL_MESHES = (("bluntfin_tets.vtu", "Density"), ("combustor_tets.vtu", "Density"))
-QUICK_MAX_TETS = 330_000
+from _common import (  # noqa: E402
+    CUBE_NS, QUICK_MAX_TETS, REAL_MESHES, TETS_DATA, load_quiet, loadavg, machine, write_json,
+)
+
+DEFAULT_DATA = TETS_DATA
 OPACITY = 0.5
 TARGET: dict[str, Any] = {"min_tets": 200_000, "speedup": 2.0,
           "what": "tetvr >= 2x faster than VTK's PT per view change at 512x512 on >= 200k tets, and more accurate"}
@@ -89,13 +87,7 @@ def _mesh_specs(quick: bool, data_dir: Path) -> tuple[list[tuple[str, Callable[[
         if not path.exists():
             notes.append(f"skipped {fname}: not in {data_dir}")
             continue
-
-        def load(path: Path = path, field: str = field) -> TetMesh:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # "dropped N zero-volume tetrahedra"
-                return tetvr.read(path, field)
-
-        specs.append((f"{path.stem.removesuffix('_tets')} ({field})", load))
+        specs.append((f"{path.stem.removesuffix('_tets')} ({field})", functools.partial(load_quiet, path, field)))
     return specs, notes
 
 
@@ -199,13 +191,6 @@ def bench_mesh(name: str, mesh: TetMesh, size: tuple[int, int], ref_size: tuple[
                      "met": bool(rec["speedup_vs_vtk_pt"]["tetvr"] >= TARGET["speedup"] and more_accurate)}
     pics = {"reference": refs["exact"], **images}
     return rec, pics
-
-
-def _write_json(path: Path, data: dict[str, Any]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=float) + "\n")
-    os.replace(tmp, path)
 
 
 def _picture(pics: dict[str, np.ndarray], path: Path) -> None:
@@ -392,16 +377,14 @@ def main(argv: list[str] | None = None) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         path = args.data / "bluntfin_tets.vtu"
         if path.exists():
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                name, mesh = "bluntfin (Density)", tetvr.read(path, "Density")
+            name, mesh = "bluntfin (Density)", load_quiet(path, "Density")
         else:
             name, mesh = "cube(20)", synthetic.cube(20)
         print(f"{name}: PSNR (dB) of: convention | colour averaging | VTK PT vs own-convention reference | "
               "VTK PT vs tetvr parity | tetvr parity vs reference | VTK PT vs exact | tetvr vs exact")
         rec = anatomy(name, mesh, (256, 256), args.out)
         rec.update(vtk_status=why, date=_dt.datetime.now().isoformat(timespec="seconds"))
-        _write_json(args.out / "vs_vtk_anatomy.json", rec)
+        write_json(args.out / "vs_vtk_anatomy.json", rec)
         print(json.dumps(rec["class2_opacity_bug"], indent=1))
         return 0
     repeats = args.repeats or (3 if args.quick else 5)
@@ -415,9 +398,7 @@ def main(argv: list[str] | None = None) -> int:
         "size": list(size), "ref_size": list(ref_size), "repeats": repeats, "step_deg": args.step,
         "opacity": OPACITY, "tetvr_settings": RenderSettings().to_dict(), "parity_settings": PARITY_SETTINGS.to_dict(),
         "vtk_status": why, "vtk_version": why.split(",")[0].removeprefix("VTK "), "gl_renderer": gl,
-        "machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(), "python": platform.python_version(),
-                    "numpy": np.__version__},
-        "loadavg_start": list(os.getloadavg()), "notes": notes, "meshes": [],
+        "machine": machine(), "loadavg_start": loadavg(), "notes": notes, "meshes": [],
         "fields": {"cpu_utilisation": "median CPU seconds per wall second of this process over the timed tetvr "
                                       "frames (llvmpipe rasterises on every core); VTK runs in a child process",
                    "vtk_timing": "VTK frames are timed inside the VTK process, from the camera change to the "
@@ -433,14 +414,14 @@ def main(argv: list[str] | None = None) -> int:
             res["meshes"].append(rec)
             slug = "".join(c if c.isalnum() else "_" for c in name.split(" ")[0]).strip("_")
             _picture(pics, args.out / f"vs_vtk_{slug}.png")
-            _write_json(out_json, res)
+            write_json(out_json, res)
             del mesh, pics
     except KeyboardInterrupt:
         res["interrupted"] = True
-    res["loadavg_end"] = list(os.getloadavg())
+    res["loadavg_end"] = loadavg()
     big = [m for m in res["meshes"] if m["target"]["applies"]]
     res["target_met_on_all_big_meshes"] = bool(big) and all(m["target"]["met"] for m in big)
-    _write_json(out_json, res)
+    write_json(out_json, res)
     print_table(res)
     plot(res, args.out / "vs_vtk.png")
     print(f"\nwrote {out_json} and {args.out / 'vs_vtk.png'}")

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -20,17 +22,25 @@ def shared_file(rel: str) -> Path:
     return path
 
 
-@pytest.fixture(scope="module")
-def renderer():
-    from tetvr.gl import GLUnavailableError, Renderer
+def gl_object(make: Callable[[], Any], what: str) -> Iterator[Any]:
+    """Fixture body for a GL object with its own context: ``make()`` it (fail the test with
+    ``what`` if there is no context), yield it, check that GL reported no error, release it."""
+    from tetvr.gl import GLUnavailableError
 
     try:
-        r = Renderer()
+        obj = make()
     except GLUnavailableError as exc:  # pragma: no cover - CI has Mesa's EGL
-        pytest.fail(f"no OpenGL 4.3 context: {exc}")
-    yield r
-    assert r.ctx.error == "GL_NO_ERROR"
-    r.release()
+        pytest.fail(f"{what}: {exc}")
+    yield obj
+    assert obj.ctx.error == "GL_NO_ERROR"
+    obj.release()
+
+
+@pytest.fixture(scope="module")
+def renderer():
+    from tetvr.gl import Renderer
+
+    yield from gl_object(Renderer, "no OpenGL 4.3 context")
 
 
 def save_failure(name: str, got: np.ndarray, want: np.ndarray) -> Path:

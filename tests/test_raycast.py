@@ -19,7 +19,6 @@ import numpy as np
 import pytest
 
 from tetvr import Camera, TransferFunction
-from tetvr.gl.context import GLUnavailableError
 from tetvr.gl.raycaster import MODES, Raycaster
 from tetvr.image import psnr
 from tetvr.optics import mean_neg_log
@@ -33,7 +32,7 @@ from tetvr.raycast_reference import (
 )
 from tetvr.volume import Volume, read_volume
 
-from .conftest import save_failure, shared_file
+from .conftest import gl_object, save_failure, shared_file
 
 pytestmark = pytest.mark.gl
 
@@ -43,13 +42,7 @@ EXACT = RaycastSettings(termination=1.0)  # no early termination: compare agains
 
 @pytest.fixture(scope="module")
 def raycaster():
-    try:
-        rc = Raycaster()
-    except GLUnavailableError as exc:  # pragma: no cover - CI has Mesa's EGL
-        pytest.fail(f"no OpenGL context: {exc}")
-    yield rc
-    assert rc.ctx.error == "GL_NO_ERROR"
-    rc.release()
+    yield from gl_object(Raycaster, "no OpenGL context")
 
 
 # ---------------------------------------------------------------------------------
