@@ -2,7 +2,7 @@
 // classify.comp -- per-tet projective classification (Shirley & Tuchman 1990), computed on
 // the GPU on every view change as in IPTINT (Marroquim et al. 2008).
 //
-// In:  Points, Tets (common.glsl), u_view, u_proj, u_perspective, u_near, u_offset, u_count.
+// In:  Points, Tets (common.glsl), u_view, u_proj, u_near, u_far, u_offset, u_count.
 // Out: Fans[tet]: the silhouette polygon (3 or 4 vertices, cyclic) and the thick vertex,
 //      i.e. the front and back points (eye space) and scalars of the ray through it.
 //      Class 1: one vertex projects inside the triangle of the other three; it is the thick

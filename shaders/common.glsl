@@ -14,7 +14,8 @@ struct TetFan {
     ivec4 ids;     // silhouette vertices in cyclic order; ids.w == -1 for a 3-vertex silhouette,
                    // ids.w == -2 if the tet lies wholly outside the clipping range.
                    // ids.x < 0: the tet crosses the near plane (or the eye plane), where its
-                   // projection is unbounded: it is drawn as a full-screen quad whose
+                   // projection is unbounded: it is drawn as the screen rectangle bounding its
+                   // part beyond the near plane (front = (x_lo, y_lo, x_hi, y_hi) in NDC), whose
                    // fragments intersect their ray with the tet exactly (tet id = -1 - ids.x).
     vec4 front;    // thick vertex, front point: xyz_eye, scalar
     vec4 back;     // thick vertex, back point:  xyz_eye, scalar

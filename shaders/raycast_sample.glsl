@@ -5,14 +5,13 @@
 // point p_idx in index space reads texture((p_idx + 0.5) / n): hardware trilinear
 // interpolation, clamped to the box [0, n-1] like the CPU reference; INTERPOLATION_CUBIC 1
 // reconstructs with the cubic B-spline instead. The texture holds
-// the raw values (8/16-bit normalized or float); scalar = texel * u_value_scale + u_value_offset.
+// the raw values (8/16-bit normalized or float); scalar = texel * u_value_scale.
 // Transfer function: sampler2D of u_tf_size x 1 RGBA = (colour, opacity) at
 // u_tf_size evenly spaced scalars over u_scalar_range (declared by lookup.glsl).
 
 uniform sampler3D u_volume;
 uniform vec3 u_inv_dims;       // 1 / (nx, ny, nz)
 uniform float u_value_scale;
-uniform float u_value_offset;
 uniform sampler2D u_tf;
 uniform float u_tf_size;
 
@@ -42,11 +41,11 @@ float scalar_at(vec3 p_idx) {
                     + g1.y * (g0.x * texel_at(vec3(h0.x, h1.y, h0.z)) + g1.x * texel_at(vec3(h1.x, h1.y, h0.z))))
             + g1.z * (g0.y * (g0.x * texel_at(vec3(h0.x, h0.y, h1.z)) + g1.x * texel_at(vec3(h1.x, h0.y, h1.z)))
                     + g1.y * (g0.x * texel_at(vec3(h0.x, h1.y, h1.z)) + g1.x * texel_at(vec3(h1.x, h1.y, h1.z))));
-    return v * u_value_scale + u_value_offset;
+    return v * u_value_scale;
 }
 #else
 float scalar_at(vec3 p_idx) {
-    return texel_at(p_idx) * u_value_scale + u_value_offset;
+    return texel_at(p_idx) * u_value_scale;
 }
 #endif
 

@@ -94,3 +94,25 @@ def test_viewer_blit_shaders_compile():
         prog = r.ctx.program(vertex_shader=assemble("blit.vert")[0], fragment_shader=assemble("blit.frag")[0])
         assert r.ctx.error == "GL_NO_ERROR"
         prog.release()
+
+
+def test_table_follows_the_transfer_function_asked_for():
+    # Regression: table() used to remember the key of its last call but return the table of
+    # the last frame, so asking twice for tfB after a frame with tfA gave tfA's table.
+    from tetvr.preintegrate import table_for
+
+    mesh = synthetic.cube(2)
+    s = RenderSettings(table_scalar_bins=32, table_thickness_slices=4)
+    tf_a = default_transfer_function(mesh, opacity=0.2)
+    tf_b = default_transfer_function(mesh, opacity=0.9)
+    with Renderer(s) as r:
+        r.render(mesh, Camera.fit(mesh), tf_a, size=(8, 8))
+        table_a = r.table(mesh, tf_a)
+        want = table_for(tf_b, mesh.scalar_range, mesh.max_edge, n_bins=s.table_scalar_bins,
+                         n_slices=s.table_thickness_slices, log_base=s.table_log_base,
+                         encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics)
+        for _ in range(2):
+            table_b = r.table(mesh, tf_b)
+            assert np.array_equal(table_b.data, want.data)
+            assert not np.array_equal(table_b.data, table_a.data)
+        assert r.table(mesh, tf_a) is table_a  # and back: the frame's table again

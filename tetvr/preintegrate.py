@@ -51,7 +51,7 @@ from numpy.typing import NDArray
 from .optics import MAX_OPACITY, OPTICS, mean_neg_log
 from .transfer import TransferFunction
 
-__all__ = ["PreintegrationTable", "build_table", "table_for"]
+__all__ = ["PreintegrationTable", "build_table", "table_for", "table_scalar_range"]
 
 # Largest extinction (per world unit) stored in a "normalized" table. A tiny unit distance
 # gives extinctions past float32's range: stored as inf, the shader's d * inf at d = 0 is
@@ -153,6 +153,25 @@ class PreintegrationTable:
         return out
 
 
+def table_scalar_range(data_range: tuple[float, float], tf: TransferFunction) -> tuple[float, float]:
+    """The scalar span of a table (and of the ray caster's transfer-function texture).
+
+    The union of the data range and the transfer function's domain, so no segment is
+    clamped at the table's edge (clamping a scalar that crosses the edge would bend the
+    linear ramp the table assumes); an empty span is padded to a tiny positive one.
+
+    >>> tf = TransferFunction.preset("grayscale", (0, 1))
+    >>> table_scalar_range((-0.5, 0.5), tf)
+    (-0.5, 1.0)
+    """
+    lo = min(float(data_range[0]), tf.domain[0])
+    hi = max(float(data_range[1]), tf.domain[1])
+    if hi <= lo:
+        pad = max(abs(lo) * 1e-6, 1e-12)
+        lo, hi = lo - pad, hi + pad
+    return lo, hi
+
+
 def table_for(
     tf: TransferFunction,
     data_range: tuple[float, float],
@@ -167,25 +186,13 @@ def table_for(
 ) -> PreintegrationTable:
     """The table for a transfer function and a mesh, from a cache keyed by all inputs.
 
-    The scalar axis spans the union of the data range and the transfer function's
-    domain, so no segment is clamped at the table's edge (clamping a scalar that crosses
-    the edge would bend the linear ramp the table assumes).
+    The scalar axis spans :func:`table_scalar_range`: the union of the data range and
+    the transfer function's domain.
     """
-    lo = min(float(data_range[0]), tf.domain[0])
-    hi = max(float(data_range[1]), tf.domain[1])
-    if hi <= lo:
-        pad = max(abs(lo) * 1e-6, 1e-12)
-        lo, hi = lo - pad, hi + pad
     # Thicknesses are rounded up to 7 significant digits so near-equal meshes share a table.
     d_top = float(f"{d_max * (1 + 1e-6):.7g}")
-    return _cached(tf, (lo, hi), d_top, n_bins, n_slices, float(log_base), encoding, dtype, optics)
-
-
-@functools.lru_cache(maxsize=32)
-def _cached(tf: TransferFunction, scalar_range: tuple[float, float], d_max: float, n_bins: int,
-            n_slices: int, log_base: float, encoding: str, dtype: str, optics: str = "exact") -> PreintegrationTable:
-    return build_table(tf, scalar_range, d_max, n_bins=n_bins, n_slices=n_slices, log_base=log_base,
-                       encoding=encoding, dtype=dtype, optics=optics)
+    return _cached(tf, table_scalar_range(data_range, tf), d_top, n_bins=n_bins, n_slices=n_slices,
+                   log_base=float(log_base), encoding=encoding, dtype=dtype, optics=optics)
 
 
 def build_table(
@@ -253,9 +260,8 @@ def build_table(
     prefix = np.concatenate([[0.0], np.cumsum(tau_bin)])  # sum of tau over bins < i
     i_idx = np.arange(n_bins)
     span = np.abs(i_idx[None, :] - i_idx[:, None])  # [sb, sf]
+    # [sb, sf], symmetric: the mean over the bins between, or the node's own on the diagonal.
     mean_tau = np.where(span > 0, np.abs(prefix[None, :] - prefix[:, None]) / np.maximum(span, 1), tau_node[None, :])
-    mean_tau = mean_tau.T  # now indexed [sb, sf]: prefix difference is symmetric, diagonal by sf
-    mean_tau[i_idx, i_idx] = tau_node
     if optics == "vtk":  # VTK's PT: the mean of the two ends, not of the segment
         mean_tau = 0.5 * (tau_node[None, :] + tau_node[:, None])
         mean_color = 0.5 * (color[None, :, :] + color[:, None, :])  # [sb, sf, 3]
@@ -285,7 +291,7 @@ def build_table(
             chroma = np.where(alpha[..., None] > 1e-300, rgb / alpha[..., None], 0.0)
         table[1:, ..., :3] = np.clip(chroma, 0.0, 1.0)
         table[:, ..., 3] = np.minimum(mean_tau, _MAX_STORED_TAU)[None]
-        table[0, ..., :3] = mean_color if optics == "vtk" else _thin_limit(color, tau_bin, tau_node)
+        table[0, ..., :3] = mean_color if optics == "vtk" else _thin_limit(color, tau_bin, tau_node, prefix)
         if dtype == "uint8":
             alpha_scale = float(max(min(mean_tau.max(), _MAX_STORED_TAU), 1e-300))
             table[..., 3] /= alpha_scale
@@ -297,6 +303,10 @@ def build_table(
     thicknesses = np.concatenate([[0.0], thick])
     return PreintegrationTable(data=data, scalar_range=(lo, hi), thicknesses=thicknesses,
                                log_base=float(log_base), encoding=encoding, alpha_scale=alpha_scale)
+
+
+# table_for's cache (called with keywords, so every call shares one key layout).
+_cached = functools.lru_cache(maxsize=32)(build_table)
 
 
 def _diagonal_runs(color: NDArray[np.float64], tau_bin: NDArray[np.float64], thick: NDArray[np.floating[Any]]) -> NDArray[np.float64]:
@@ -337,14 +347,17 @@ def _diagonal_runs(color: NDArray[np.float64], tau_bin: NDArray[np.float64], thi
     return np.clip(out, 0.0, None)
 
 
-def _thin_limit(color: NDArray[np.float64], tau_bin: NDArray[np.float64], tau_node: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Colour per unit alpha as thickness -> 0: the extinction-weighted mean colour."""
+def _thin_limit(color: NDArray[np.float64], tau_bin: NDArray[np.float64], tau_node: NDArray[np.float64],
+                prefix: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Colour per unit alpha as thickness -> 0: the extinction-weighted mean colour.
+
+    ``prefix`` is the prefix sum of ``tau_bin`` (``prefix[i]``: the sum over bins < i).
+    """
     n_bins = color.shape[0]
     weighted = tau_bin[:, None] * 0.5 * (color[:-1] + color[1:])
     q = np.concatenate([np.zeros((1, 3)), np.cumsum(weighted, axis=0)])
-    p = np.concatenate([[0.0], np.cumsum(tau_bin)])
     num = np.abs(q[:, None, :] - q[None, :, :])  # [sb, sf] symmetric
-    den = np.abs(p[:, None] - p[None, :])
+    den = np.abs(prefix[:, None] - prefix[None, :])
     with np.errstate(invalid="ignore", divide="ignore"):
         out = np.where(den[..., None] > 0, num / np.where(den > 0, den, 1.0)[..., None], 0.0)
     i = np.arange(n_bins)

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..camera import Camera
-from ..preintegrate import PreintegrationTable, table_for
+from ..preintegrate import PreintegrationTable, table_for, table_scalar_range
 from ..raycast_reference import INTERPOLATIONS, RAYCAST_MODES, RaycastSettings, normalize_ray_limits
 from ..transfer import TransferFunction
 from ..volume import Volume
@@ -36,11 +36,10 @@ __all__ = ["Raycaster", "RaycastStats", "MODES"]
 
 @dataclasses.dataclass(frozen=True)
 class _Mode:
-    """How a mode is drawn: its shader defines, what it reads, its blend state."""
+    """How a mode is drawn: its shader defines and what it reads."""
 
     defines: tuple[tuple[str, int], ...]
     uses_table: bool  # the pre-integration table (else only the 1D transfer function)
-    blend: bool = False  # no mode blends: each fragment composites its whole ray itself
 
 
 #: Rendering mode -> shader variant (see :class:`~tetvr.raycast_reference.RaycastSettings`).
@@ -346,16 +345,14 @@ class Raycaster:
         use_limits = self._use_limits(t_start, t_end, (width, height))
         clock.lap("upload")
         mode = MODES[s.mode]
-        # Ranges come from the original volume: downsampling only narrows them.
+        # Ranges come from the original volume: downsampling only narrows them. The
+        # table spans the same scalar range (its u_scalar_range equals this one).
+        scalar_range = table_scalar_range(volume.scalar_range, tf)
         table_uniforms: dict[str, Any] = {}
         if mode.uses_table:
             table = self.table(volume, tf, s)
             self._use_table(table)
-            scalar_range = table.scalar_range
             table_uniforms = table.gl_uniforms()
-            del table_uniforms["u_scalar_range"]  # set below for both paths
-        else:
-            scalar_range = _classification_range(volume, tf)
         self._use_tf(tf, scalar_range, s.tf_samples)
         clock.lap("table")
 
@@ -376,18 +373,19 @@ class Raycaster:
         clip_lo, clip_hi = (np.asarray(s.clip_box[0]) - centre, np.asarray(s.clip_box[1]) - centre) \
             if s.clip_box is not None else (np.zeros(3), np.zeros(3))
         prog = self._program(s.mode, s.interpolation)
-        set_uniforms(prog,
-             u_inv_viewport=(1.0 / width, 1.0 / height), u_perspective=0 if camera.parallel_projection else 1,
-             u_k=(k * aspect, k), u_eye_to_index=eye_to_index, u_eye_to_local=eye_to_local,
-             u_box_hi=tuple(float(n - 1) for n in gpu.dims), u_clip_range=camera.clipping_range,
-             u_use_clip_box=int(s.clip_box is not None), u_clip_lo=tuple(clip_lo), u_clip_hi=tuple(clip_hi),
-             u_use_limits=int(use_limits), u_step=step, u_max_steps=max_steps,
-             u_termination=s.termination, u_jitter=int(s.jitter), u_seed=s.seed,
-             u_iso=s.iso_for(volume), u_iso_opacity=s.iso_opacity, u_shading=s.shading,
-             u_gradient_to_local=a_inv.T,
-             u_inv_dims=tuple(1.0 / n for n in gpu.dims), u_value_scale=self._value_scale, u_value_offset=0.0,
-             u_tf_size=float(s.tf_samples), u_scalar_range=scalar_range, u_volume=1, u_tf=2, u_limits=3,
-             **table_uniforms)
+        uniforms = dict(
+            u_inv_viewport=(1.0 / width, 1.0 / height), u_perspective=0 if camera.parallel_projection else 1,
+            u_k=(k * aspect, k), u_eye_to_index=eye_to_index, u_eye_to_local=eye_to_local,
+            u_box_hi=tuple(float(n - 1) for n in gpu.dims), u_clip_range=camera.clipping_range,
+            u_use_clip_box=int(s.clip_box is not None), u_clip_lo=tuple(clip_lo), u_clip_hi=tuple(clip_hi),
+            u_use_limits=int(use_limits), u_step=step, u_max_steps=max_steps,
+            u_termination=s.termination, u_jitter=int(s.jitter), u_seed=s.seed,
+            u_iso=s.iso_for(volume), u_iso_opacity=s.iso_opacity, u_shading=s.shading,
+            u_gradient_to_local=a_inv.T,
+            u_inv_dims=tuple(1.0 / n for n in gpu.dims), u_value_scale=self._value_scale,
+            u_tf_size=float(s.tf_samples), u_scalar_range=scalar_range, u_volume=1, u_tf=2, u_limits=3)
+        uniforms.update(table_uniforms)  # its u_scalar_range is scalar_range
+        set_uniforms(prog, **uniforms)
         self._use_target((width, height))
         self._fbo.use()
         self._fbo.clear(0.0, 0.0, 0.0, 0.0)
@@ -412,13 +410,3 @@ class Raycaster:
             raise RuntimeError(f"OpenGL error after ray casting: {err}")
         self.last_stats = RaycastStats(size=(width, height), volume_dims=gpu.dims, max_steps=max_steps, **clock.laps)
         return image
-
-
-def _classification_range(volume: Volume, tf: TransferFunction) -> tuple[float, float]:
-    """The scalar span of the transfer-function texture: data and TF domain (as table_for)."""
-    lo = min(volume.scalar_range[0], tf.domain[0])
-    hi = max(volume.scalar_range[1], tf.domain[1])
-    if hi <= lo:
-        pad = max(abs(lo) * 1e-6, 1e-12)
-        lo, hi = lo - pad, hi + pad
-    return lo, hi

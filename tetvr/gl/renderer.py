@@ -94,8 +94,8 @@ class Renderer:
         self._centre = np.zeros(3)
         self._fans: Any = None
         self._order: Any = None
-        self._table: PreintegrationTable | None = None
-        self._table_key: tuple[Any, ...] | None = None
+        self._table: PreintegrationTable | None = None  # the table in the texture
+        self._table_cache: tuple[tuple[Any, ...], PreintegrationTable] | None = None  # table()'s last (key, table)
         self._table_tex: Any = None
         self._targets: dict[tuple[tuple[int, int], int, str], Any] = {}
         self._clock = Clock(self.ctx, False)
@@ -125,7 +125,7 @@ class Renderer:
         self._targets.clear()
         self._fans = self._order = self._table_tex = None
         self._mesh = None
-        self._table = None
+        self._table = self._table_cache = None
         self.ctx.release()
         self._released = True
 
@@ -264,18 +264,18 @@ class Renderer:
     def table(self, mesh: TetMesh, tf: TransferFunction) -> PreintegrationTable:
         """The pre-integration table this renderer uses for a mesh and transfer function.
 
-        The renderer keeps its current table, so a frame with the same inputs reuses it
-        whatever other renderers did to the shared cache of :func:`table_for`.
+        The renderer keeps the last table it returned, so a frame with the same inputs
+        reuses it whatever other renderers did to the shared cache of :func:`table_for`.
         """
         s = self.settings
-        key = (tf, mesh.scalar_range, mesh.max_edge, s.table_scalar_bins, s.table_thickness_slices,
-               s.table_log_base, s.table_encoding, s.table_dtype, s.optics)
-        if self._table is not None and key == self._table_key:
-            return self._table
-        table = table_for(tf, mesh.scalar_range, mesh.max_edge, n_bins=s.table_scalar_bins,
-                          n_slices=s.table_thickness_slices, log_base=s.table_log_base,
-                          encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics)
-        self._table_key = key
+        options: dict[str, Any] = dict(n_bins=s.table_scalar_bins, n_slices=s.table_thickness_slices,
+                                       log_base=s.table_log_base, encoding=s.table_encoding,
+                                       dtype=s.table_dtype, optics=s.optics)
+        key = (tf, mesh.scalar_range, mesh.max_edge, *options.items())
+        if self._table_cache is not None and self._table_cache[0] == key:
+            return self._table_cache[1]
+        table = table_for(tf, mesh.scalar_range, mesh.max_edge, **options)
+        self._table_cache = (key, table)
         return table
 
     def _view_uniforms(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> dict[str, Any]:
@@ -285,10 +285,9 @@ class Renderer:
         view = camera.view_matrix()
         view[:3, 3] += view[:3, :3] @ self._centre  # the buffers hold points minus the centre
         near, far = camera.clipping_range
-        return dict(u_view=view, u_proj=camera.projection_matrix(size[0] / size[1]),
-                    u_perspective=0 if camera.parallel_projection else 1, u_near=near, u_far=far,
-                    u_viewport=(float(size[0]), float(size[1])),
-                    u_pixel_xy=_pixel_xy(camera, size))
+        proj = camera.projection_matrix(size[0] / size[1])
+        return dict(u_view=view, u_proj=proj, u_perspective=0 if camera.parallel_projection else 1,
+                    u_near=near, u_far=far, u_pixel_xy=_pixel_xy(proj, size))
 
     def _classify(self, n_tets: int, uniforms: dict[str, Any]) -> None:
         """Run classify.comp over the tets in the tets buffer."""
@@ -407,10 +406,10 @@ class Renderer:
         fbo = self._use_target(size, 4, fb_dtype)
         fbo.use()
         fbo.clear(0.0, 0.0, 0.0, 0.0)
+        self._table_tex.use(0)  # nothing in the loop binds another texture
         self._clock.lap("setup")
         for n_classify, n in self._chunks(mesh, order_ids):
             self._classify(n_classify, uniforms)
-            self._table_tex.use(0)
             self._draw(prog, fbo, n, ((moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA), moderngl.FUNC_ADD))
         image = self._read(fbo, size, 4, fb_dtype)
         self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, cycle_breaks=cycle_breaks, n_culled=n_culled,
@@ -451,10 +450,11 @@ class Renderer:
         return front, back
 
 
-def _pixel_xy(camera: Camera, size: tuple[int, int]) -> tuple[float, float, float, float]:
-    """(a, b, c, d) with ``gl_FragCoord.xy * (a, b) + (c, d)`` = the eye-space x and y per
-    unit depth of the pixel's ray (perspective), i.e. NDC divided by the projection's scale."""
-    proj = camera.projection_matrix(size[0] / size[1])
+def _pixel_xy(proj: NDArray[np.float64], size: tuple[int, int]) -> tuple[float, float, float, float]:
+    """(a, b, c, d) with ``gl_FragCoord.xy * (a, b) + (c, d)`` = NDC divided by the
+    projection's scale (``proj``, the camera's projection matrix for this size): the
+    eye-space x and y per unit depth of the pixel's ray in perspective, its eye-space x
+    and y in parallel projection."""
     sx, sy = float(proj[0, 0]), float(proj[1, 1])
     return 2.0 / (size[0] * sx), 2.0 / (size[1] * sy), -1.0 / sx, -1.0 / sy
 
