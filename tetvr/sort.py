@@ -192,7 +192,12 @@ def _graph_order(mesh: TetMesh, camera: Camera, method: str, window: float,
     front, clear = _face_graph(adj, camera)
     n_constraints = int(np.count_nonzero(front >= 0))
     # Extra edges as CSR lists: successors (cells in front) and predecessors of each cell.
+    # Without extra edges they stay None, which keeps MPVO/MPVONC's loop as it was.
     waits = np.zeros(m, dtype=np.int64)
+    succ_ptr: NDArray[np.intp] | None = None
+    pred_ptr: NDArray[np.intp] | None = None
+    pred_list: NDArray[np.int64] | None = None
+    n_extra = 0
     if extra is not None and extra.behind.size:
         by_behind = np.argsort(extra.behind, kind="stable")
         succ_ptr = np.searchsorted(extra.behind[by_behind], np.arange(m + 1))
@@ -202,9 +207,6 @@ def _graph_order(mesh: TetMesh, camera: Camera, method: str, window: float,
         pred_list = extra.behind[by_front]
         waits = np.bincount(extra.front, minlength=m).astype(np.int64)
         n_extra = int(extra.behind.size)
-    else:
-        succ_ptr = pred_ptr = pred_list = None
-        n_extra = 0
     # Each cell's sort key packs its nearness (distance from the farthest cell, float32,
     # whose bits order like the values since they are >= 0) above its id: one uint64
     # sort then orders a batch farthest first, ties by id, with no argsort and no
