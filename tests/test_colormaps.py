@@ -150,6 +150,13 @@ def test_matplotlib_colormaps():
         from_matplotlib("viridis", (1.0, 1.0))
 
 
+def test_colormap_reports_the_real_error_of_a_known_matplotlib_map():
+    pytest.importorskip("matplotlib")
+    with pytest.raises(ValueError, match="scalar_range") as err:
+        colormap("magma", (1, 0))
+    assert "unknown colour map" not in str(err.value)
+
+
 def test_colormap_prefers_tetvr_presets_and_reads_preset_files(tmp_path):
     assert colormap("hot", (0, 2), opacity=0.2) == TransferFunction.preset("hot", (0, 2), opacity=0.2)
     path = tmp_path / "c2w.json"

@@ -253,13 +253,15 @@ def colormap(
     if name.endswith(".json") and Path(name).is_file():
         return from_paraview(name, scalar_range=scalar_range, opacity=opacity, unit_distance=unit_distance)
     try:
-        return from_matplotlib(name, scalar_range, opacity=opacity, unit_distance=unit_distance)
+        import matplotlib
     except ImportError:
         raise ValueError(f"unknown colour map {name!r}: not a tetvr preset {sorted(PRESETS)}, and matplotlib "
                          "(for its colormaps) is not installed") from None
-    except ValueError:
+    if name not in matplotlib.colormaps:
         raise ValueError(f"unknown colour map {name!r}: not a tetvr preset {sorted(PRESETS)}, a matplotlib "
-                         "colormap, nor a ParaView preset .json file") from None
+                         "colormap, nor a ParaView preset .json file")
+    # Errors in the other arguments (e.g. the scalar range) surface as they are.
+    return from_matplotlib(name, scalar_range, opacity=opacity, unit_distance=unit_distance)
 
 
 # ---------------------------------------------------------------- internals

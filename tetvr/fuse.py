@@ -34,6 +34,7 @@ Everything here is numpy on images: the same code composites the GPU images
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, Callable
 
 import numpy as np
@@ -41,6 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .camera import Camera
 from .mesh import TetMesh
+from .raycast_reference import RaycastSettings, render_volume_reference, volume_ray_intervals
 from .transfer import TransferFunction
 
 __all__ = ["FUSION_MODES", "fuse", "fuse_reference", "over", "RayTextures"]
@@ -155,6 +157,10 @@ def compose(
     span = np.where(np.isfinite(entry) & np.isfinite(exit_), exit_ - entry, 0.0)
     t0 = np.where(np.isfinite(entry), entry + ray_textures.start * span, np.nan)
     t1 = np.where(np.isfinite(entry), entry + ray_textures.end * span, np.nan)
+    # The limits do not depend on the mode: cast once.
+    a = np.where(has_mesh, np.minimum(t1, front), t1).astype(np.float32)
+    b = np.where(has_mesh, np.maximum(t0, back), np.inf).astype(np.float32)
+    t0_32, t1_32 = t0.astype(np.float32), t1.astype(np.float32)
     out = np.zeros(mesh_image.shape, dtype=np.float32)
     modes = [None] if ray_textures.mode is None else list(range(len(ray_textures.modes)))
     for m in modes:
@@ -162,10 +168,8 @@ def compose(
         where = np.ones(front.shape, bool) if m is None else ray_textures.mode == m
         if not np.any(where):
             continue
-        a = np.where(has_mesh, np.minimum(t1, front), t1).astype(np.float32)
-        b = np.where(has_mesh, np.maximum(t0, back), np.inf).astype(np.float32)
-        before = render_volume(t0.astype(np.float32), a, name)
-        behind = render_volume(b, t1.astype(np.float32), name)
+        before = render_volume(t0_32, a, name)
+        behind = render_volume(b, t1_32, name)
         behind[~has_mesh] = 0.0
         # Where the window ends before the mesh starts, nothing of the volume lies behind it.
         behind[has_mesh & (t1 <= back)] = 0.0
@@ -210,10 +214,8 @@ def fuse(
     """
     from .gl.raycaster import Raycaster
     from .gl.renderer import Renderer
-    from .raycast_reference import RaycastSettings, volume_ray_intervals
 
-    if ray_textures is not None and ray_textures.size != tuple(size):
-        raise ValueError(f"ray textures are {ray_textures.size} pixels but the image is {tuple(size)}")
+    _check_ray_textures(ray_textures, size)
     own_r = renderer is None
     r = renderer or Renderer()
     own_c = raycaster is None
@@ -223,16 +225,11 @@ def fuse(
         image = r.render(mesh, camera, mesh_tf, size=size)
         front, back = r.depth_extent(mesh, camera, size=size)
 
-        def render_volume(t0: Any, t1: Any, m: str | None) -> Image:
-            s = base if m is None else _with_mode(base, m)
+        def render(t0: Any, t1: Any, s: RaycastSettings) -> Image:
             return c.render(volume, camera, volume_tf, size=size, t_start=t0, t_end=t1, settings=s)
 
-        def path() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-            iv = volume_ray_intervals(volume, camera, size)
-            return _path_images(iv, size)
-
-        return compose(mode, image, front, back, render_volume, margin=margin, ray_textures=ray_textures,
-                       volume_path=path)
+        return _compose_with_volume(mode, image, front, back, render, base, volume, camera, size, margin=margin,
+                                    ray_textures=ray_textures)
     finally:
         if own_c:
             c.release()
@@ -257,10 +254,9 @@ def fuse_reference(
     """The CPU reference of :func:`fuse`: the exact mesh image and the fine-step volume
     march, composited by the same rules. ``mesh_extent`` defaults to the exact depth
     extents from :func:`tetvr.reference.ray_segments`."""
-    from .raycast_reference import RaycastSettings, render_volume_reference, volume_ray_intervals
     from .reference import ray_segments, render_reference
 
-    base = volume_settings or RaycastSettings()
+    _check_ray_textures(ray_textures, size)
     image = render_reference(mesh, camera, mesh_tf, size)
     if mesh_extent is None:
         seg = ray_segments(mesh, camera, size)
@@ -271,21 +267,45 @@ def fuse_reference(
         mesh_extent = (front.reshape(size[1], size[0]).astype(np.float32),
                        back.reshape(size[1], size[0]).astype(np.float32))
 
-    def render_volume(t0: Any, t1: Any, m: str | None) -> Image:
-        s = base if m is None else _with_mode(base, m)
+    def render(t0: Any, t1: Any, s: RaycastSettings) -> Image:
         return render_volume_reference(volume, camera, volume_tf, size, settings=s, t_start=t0, t_end=t1)
+
+    return _compose_with_volume(mode, image, mesh_extent[0], mesh_extent[1], render,
+                                volume_settings or RaycastSettings(), volume, camera, size, margin=margin,
+                                ray_textures=ray_textures)
+
+
+def _check_ray_textures(ray_textures: RayTextures | None, size: tuple[int, int]) -> None:
+    if ray_textures is not None and ray_textures.size != tuple(size):
+        raise ValueError(f"ray textures are {ray_textures.size} pixels but the image is {tuple(size)}")
+
+
+def _compose_with_volume(
+    mode: str,
+    image: Image,
+    front: NDArray[np.float32],
+    back: NDArray[np.float32],
+    render: Callable[[Any, Any, RaycastSettings], Image],
+    base: RaycastSettings,
+    volume: Any,
+    camera: Camera,
+    size: tuple[int, int],
+    *,
+    margin: int,
+    ray_textures: RayTextures | None,
+) -> Image:
+    """:func:`compose` with a backend's volume renderer ``render(t_start, t_end, settings)``:
+    a ray-texture mode replaces the mode of the base ``settings``."""
+
+    def render_volume(t0: Any, t1: Any, m: str | None) -> Image:
+        # RaycastSettings checks the mode name.
+        return render(t0, t1, base if m is None else dataclasses.replace(base, mode=m))  # type: ignore[arg-type]
 
     def path() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         return _path_images(volume_ray_intervals(volume, camera, size), size)
 
-    return compose(mode, image, mesh_extent[0], mesh_extent[1], render_volume, margin=margin,
-                   ray_textures=ray_textures, volume_path=path)
-
-
-def _with_mode(settings: Any, mode: str) -> Any:
-    import dataclasses
-
-    return dataclasses.replace(settings, mode=mode)
+    return compose(mode, image, front, back, render_volume, margin=margin, ray_textures=ray_textures,
+                   volume_path=path)
 
 
 def _path_images(iv: Any, size: tuple[int, int]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

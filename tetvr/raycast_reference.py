@@ -181,16 +181,7 @@ class RaycastSettings:
         unknown = set(data) - names
         if unknown:
             raise ValueError(f"unknown ray-cast settings keys {sorted(unknown)}; expected some of {sorted(names)}")
-        kw = dict(data)
-        if isinstance(kw.get("shading"), list):
-            kw["shading"] = tuple(kw["shading"])
-        if kw.get("clip_box") is not None:
-            kw["clip_box"] = tuple(tuple(r) for r in kw["clip_box"])
-        return cls(**kw)
-
-
-def _check_size(size: Any) -> tuple[int, int]:
-    return image_size(size)
+        return cls(**data)  # __post_init__ turns JSON lists into tuples
 
 
 def normalize_ray_limits(t_start: ArrayLike | None, t_end: ArrayLike | None, size: tuple[int, int]) -> tuple[Float, Float]:
@@ -198,7 +189,12 @@ def normalize_ray_limits(t_start: ArrayLike | None, t_end: ArrayLike | None, siz
 
     ``None`` or NaN entries mean unlimited. The caller's arrays are not modified.
     """
-    width, height = _check_size(size)
+    return _ray_limits(t_start, t_end, *image_size(size), size)
+
+
+def _ray_limits(t_start: ArrayLike | None, t_end: ArrayLike | None, width: int, height: int,
+                size: Any) -> tuple[Float, Float]:
+    """:func:`normalize_ray_limits` for a checked size (``size`` as given, for messages)."""
     out = []
     for name, arr, free in (("t_start", t_start, -np.inf), ("t_end", t_end, np.inf)):
         if arr is None:
@@ -265,7 +261,12 @@ def volume_ray_intervals(
 ) -> RayIntervals:
     """Where each pixel ray is integrated: ``[max(entry, near, t_start), min(exit, far, t_end)]``,
     further clipped to ``clip_box`` (world) if given."""
-    width, height = _check_size(size)
+    return _ray_intervals(volume, camera, *image_size(size), clip_box=clip_box, t_start=t_start, t_end=t_end)
+
+
+def _ray_intervals(volume: Volume, camera: Camera, width: int, height: int, *, clip_box: Any,
+                   t_start: ArrayLike | None, t_end: ArrayLike | None) -> RayIntervals:
+    """:func:`volume_ray_intervals` for a checked size."""
     o, d = camera.rays(width, height)
     m = volume.world_to_index
     o_idx = o @ m[:3, :3].T + m[:3, 3]
@@ -279,7 +280,7 @@ def volume_ray_intervals(
         box = np.asarray(clip_box, dtype=np.float64)
         c0, c1 = _slab(o, d, box[0], box[1])
         t0, t1 = np.maximum(t0, c0), np.minimum(t1, c1)
-    start, end = normalize_ray_limits(t_start, t_end, (width, height))
+    start, end = _ray_limits(t_start, t_end, width, height, (width, height))
     t0 = np.maximum(t0, start.reshape(-1))
     t1 = np.minimum(t1, end.reshape(-1))
     return RayIntervals(o, d, o_idx, d_idx, t0, t1)
@@ -340,11 +341,11 @@ def render_volume_reference(
     if not isinstance(tf, TransferFunction):
         raise TypeError(f"tf must be a TransferFunction, got {type(tf).__name__}")
     s = settings or RaycastSettings()
-    width, height = _check_size(size)
+    width, height = image_size(size)
     fine = float(fine_step) if fine_step is not None else float(volume.spacing.min()) / 8.0
     if not (math.isfinite(fine) and fine > 0):
         raise ValueError(f"fine_step must be positive, got {fine_step!r}")
-    rays = volume_ray_intervals(volume, camera, (width, height), clip_box=s.clip_box, t_start=t_start, t_end=t_end)
+    rays = _ray_intervals(volume, camera, width, height, clip_box=s.clip_box, t_start=t_start, t_end=t_end)
     n_pix = width * height
     out = np.zeros((n_pix, 4))
     idx = np.nonzero(rays.hit)[0]

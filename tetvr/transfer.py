@@ -54,10 +54,7 @@ def _points(value: ArrayLike, width: int, name: str) -> tuple[tuple[float, ...],
     except (TypeError, ValueError) as exc:  # ragged rows, non-numbers
         raise ValueError(f"{name} must be a sequence of {rows} rows of numbers, got {value!r} ({exc})") from None
     if arr.ndim != 2 or arr.shape[1] != width or arr.shape[0] < 1:
-        raise ValueError(
-            f"{name} must be a sequence of {'(x, r, g, b)' if width == 4 else '(x, a)'} rows, "
-            f"got an array of shape {arr.shape}"
-        )
+        raise ValueError(f"{name} must be a sequence of {rows} rows, got an array of shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or Inf: {arr.tolist()}")
     x = arr[:, 0]

@@ -132,9 +132,7 @@ class Volume:
         # The volume owns its array (from_array and the readers pass fresh ones).
         data = np.ascontiguousarray(data)
         data.setflags(write=False)
-        spacing = _vec(self.spacing, "spacing")
-        if np.any(spacing <= 0):
-            raise ValueError(f"spacing must be positive along every axis, got {spacing.tolist()}")
+        spacing = _vec(self.spacing, "spacing", positive=True)
         origin = _vec(self.origin, "origin")
         direction = np.asarray(self.direction, dtype=np.float64)
         if direction.shape != (3, 3) or not np.all(np.isfinite(direction)):
@@ -343,7 +341,7 @@ def _trilinear(vol: NDArray[np.float64], ijk: NDArray[np.float64]) -> NDArray[np
     shape = ijk.shape[:-1]
     p = ijk.reshape(-1, 3)
     out = np.zeros(p.shape[0])
-    for lo, hi in ((0, p.shape[0]),) if p.shape[0] <= 1 << 20 else _chunks(p.shape[0], 1 << 20):
+    for lo, hi in _chunks(p.shape[0], 1 << 20):
         q = p[lo:hi]
         axes = []
         for a, n in enumerate((nx, ny, nz)):
@@ -495,6 +493,13 @@ def _from_bytes(buf: bytes, dtype: np.dtype[Any], dims: tuple[int, int, int], wh
     return arr.astype(dtype.newbyteorder("="), copy=True)
 
 
+def _next_line(raw: bytes, pos: int) -> tuple[str, int]:
+    """The line of ``raw`` starting at ``pos`` (latin-1, without its ``\\r\\n``), and where the next begins."""
+    end = raw.find(b"\n", pos)
+    end = len(raw) if end < 0 else end
+    return raw[pos:end].decode("latin-1").rstrip("\r"), end + 1
+
+
 def read_raw(
     path: str | os.PathLike[str],
     *,
@@ -598,10 +603,7 @@ def read_nrrd(path: str | os.PathLike[str], *, space: str = "LPS") -> Volume:
     pos = raw.index(b"\n") + 1
     list_files: list[str] | None = None
     while pos < len(raw):
-        end = raw.find(b"\n", pos)
-        end = len(raw) if end < 0 else end
-        line = raw[pos:end].decode("latin-1").rstrip("\r")
-        pos = end + 1
+        line, pos = _next_line(raw, pos)
         if list_files is not None:
             if line.strip():
                 list_files.append(line.strip())
@@ -704,7 +706,8 @@ def read_nrrd(path: str | os.PathLike[str], *, space: str = "LPS") -> Volume:
     if "data file" in fields or "datafile" in fields:
         spec = fields.get("data file", fields.get("datafile", ""))
         files = _nrrd_data_files(p, spec, list_files)
-        chunks = [_nrrd_read_file(f, encoding, line_skip, byte_skip, len(files), dtype, dims) for f in files]
+        chunks = [_nrrd_decode(f.read_bytes(), encoding, line_skip, byte_skip, dtype, dims, f.name, len(files))
+                  for f in files]
         buf = (b"\n" if encoding in ("ascii", "text", "txt") else b"").join(chunks)
     else:
         body = raw[header_end:]
@@ -721,7 +724,6 @@ def read_nrrd(path: str | os.PathLike[str], *, space: str = "LPS") -> Volume:
 
 
 def _nrrd_data_files(header: Path, spec: str, listed: list[str] | None) -> list[Path]:
-    base = header.parent
     if listed is not None:
         names = listed
     else:
@@ -733,28 +735,16 @@ def _nrrd_data_files(header: Path, spec: str, listed: list[str] | None) -> list[
             names = [parts[0] % i for i in range(lo, hi + (1 if step > 0 else -1), step)]
         else:
             names = [spec]
-    files = [base / n for n in names]
-    for f in files:
-        if not f.is_file():
-            raise FileNotFoundError(f"NRRD data file not found: {str(f)!r} (named by {header.name!r})")
-    return files
-
-
-def _nrrd_read_file(f: Path, encoding: str, line_skip: int, byte_skip: int, n_files: int, dtype: np.dtype[Any],
-                    dims: tuple[int, int, int]) -> bytes:
-    return _nrrd_decode(f.read_bytes(), encoding, line_skip, byte_skip, dtype, dims, f.name, n_files)
+    return _existing_data_files(header, names, "NRRD")
 
 
 def _nrrd_decode(body: bytes, encoding: str, line_skip: int, byte_skip: int, dtype: np.dtype[Any],
                  dims: tuple[int, int, int], name: str, n_files: int = 1) -> bytes:
     for _ in range(line_skip):
         body = body[body.index(b"\n") + 1:]
-    if encoding in ("raw",):
-        if byte_skip == -1:
-            size = int(np.prod(dims)) * dtype.itemsize // n_files
-            return body[len(body) - size:]
-        return body[byte_skip:]
-    if encoding in ("gzip", "gz"):
+    if encoding == "raw":
+        out = body
+    elif encoding in ("gzip", "gz"):
         out = gzip.decompress(body)
     elif encoding in ("bzip2", "bz2"):
         out = bz2.decompress(body)
@@ -792,10 +782,8 @@ def read_metaimage(path: str | os.PathLike[str], *, space: str = "LPS") -> Volum
     pos = 0
     list_files: list[str] | None = None
     while pos < len(raw):
-        end = raw.find(b"\n", pos)
-        end = len(raw) if end < 0 else end
-        line = raw[pos:end].decode("latin-1").strip()
-        pos = end + 1
+        line, pos = _next_line(raw, pos)
+        line = line.strip()
         if list_files is not None:
             if line:
                 list_files.append(line)
@@ -895,10 +883,15 @@ def _met_data_files(header: Path, spec: str, listed: list[str] | None) -> list[P
             names = [parts[0] % i for i in range(lo, hi + 1, step)]
         else:
             names = [spec]
+    return _existing_data_files(header, names, "MetaImage")
+
+
+def _existing_data_files(header: Path, names: list[str], what: str) -> list[Path]:
+    """The data files ``names`` (relative to ``header``'s folder); each must exist."""
     files = [header.parent / n for n in names]
     for f in files:
         if not f.is_file():
-            raise FileNotFoundError(f"MetaImage data file not found: {str(f)!r} (named by {header.name!r})")
+            raise FileNotFoundError(f"{what} data file not found: {str(f)!r} (named by {header.name!r})")
     return files
 
 
@@ -1095,10 +1088,7 @@ class _Tokens:
         self.raw, self.pos, self.name = raw, 0, name
 
     def line(self) -> str:
-        end = self.raw.find(b"\n", self.pos)
-        end = len(self.raw) if end < 0 else end
-        text = self.raw[self.pos:end].decode("latin-1").rstrip("\r")
-        self.pos = end + 1
+        text, self.pos = _next_line(self.raw, self.pos)
         return text
 
     def token(self) -> str | None:
@@ -1357,13 +1347,11 @@ def read_dicom(path: str | os.PathLike[str], *, space: str = "LPS") -> Volume:
     if any(f.shape != shape for f in frames):
         raise ValueError(f"DICOM slices of {str(p)!r} differ in size; expected {shape} for every slice")
     raw = np.stack(frames)
-    slope = float(group[0].get("RescaleSlope", 1.0) or 1.0)
-    inter = float(group[0].get("RescaleIntercept", 0.0) or 0.0)
-    varies = any(float(ds.get("RescaleSlope", 1.0) or 1.0) != slope or float(ds.get("RescaleIntercept", 0.0) or 0.0) != inter
-                 for ds in group)
-    if varies:
-        data = np.stack([f * float(ds.get("RescaleSlope", 1.0) or 1.0) + float(ds.get("RescaleIntercept", 0.0) or 0.0)
-                         for f, ds in zip(frames, group)]).astype(np.float32)
+    rescale = [(float(ds.get("RescaleSlope", 1.0) or 1.0), float(ds.get("RescaleIntercept", 0.0) or 0.0))
+               for ds in group]
+    slope, inter = rescale[0]
+    if any(k != slope or b != inter for k, b in rescale):
+        data = np.stack([f * k + b for f, (k, b) in zip(frames, rescale)]).astype(np.float32)
     elif slope == int(slope) and inter == int(inter) and raw.dtype.kind in "iu":
         wide = raw.astype(np.int64) * int(slope) + int(inter)
         lo, hi = int(wide.min()), int(wide.max())
