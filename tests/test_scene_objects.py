@@ -74,6 +74,8 @@ def test_read_post_vtk_and_cell_data_average(tmp_path):
     assert by_point[(0.0, 0.0, 1.0)] == pytest.approx(1.0)
     with pytest.raises(KeyError, match="point fields"):
         tetvr.read(path, "nope")
+    assert m.report.fields == ("T",)  # the file's fields, for pickers (tetvr.widget)
+    assert TetMesh.from_arrays(*_tet(), np.ones(4)).report.fields == ()
 
 
 def test_read_reports_and_normalises_inverted_real_mesh():
@@ -94,6 +96,18 @@ def test_camera_frame_and_validation():
         kw.update(bad)
         with pytest.raises(ValueError):
             Camera(**kw)
+
+
+def test_bounding_sphere_is_the_one_fit_frames():
+    from tetvr.camera import bounding_sphere
+
+    mesh = synthetic.cube(2)
+    centre, radius = bounding_sphere(mesh.bounds)
+    np.testing.assert_array_equal(centre, 0.5 * (mesh.bounds[0] + mesh.bounds[1]))
+    assert radius == pytest.approx(0.5 * np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
+    cam = Camera.fit(mesh)
+    assert cam.focal_point == tuple(centre) and cam.parallel_scale == radius
+    assert bounding_sphere([(1, 2, 3), (1, 2, 3)])[1] == 1e-30  # a point still has a radius
 
 
 def test_camera_fit_contains_mesh():

@@ -268,6 +268,78 @@ def test_model_fields_save_and_load(tmp_path):
     assert other.field == "temperature" and other.camera == tetvr.load_scene(tmp_path / "scene.json").camera
 
 
+class CheckingRenderer(RecordingRenderer):
+    """A recording renderer that refuses what the GPU renderer refuses (float32 ranges)."""
+
+    def render(self, mesh, camera, tf, *, size, order=None):
+        from tetvr.render import check_float32_range
+
+        check_float32_range(mesh, tf)
+        return super().render(mesh, camera, tf, size=size, order=order)
+
+
+def _constant_scene(tmp_path):
+    import meshio
+
+    mesh = synthetic.cube(2)
+    meshio.write(tmp_path / "const.vtu", meshio.Mesh(
+        mesh.points, [("tetra", mesh.tets)],
+        point_data={"temperature": mesh.scalars, "five": np.full(mesh.n_points, 5.0)}))
+    (tmp_path / "scene.json").write_text(json.dumps({"mesh": "const.vtu", "scalars": "temperature",
+                                                     "size": [40, 30]}))
+    return tmp_path / "scene.json"
+
+
+def test_model_renders_a_constant_field(tmp_path):
+    """A constant field gets the transfer function range tetvr.render would give it, wide
+    enough for the GPU's float32 (it used to be refused as 'too narrow')."""
+    from tetvr.render import default_transfer_function
+
+    path = _constant_scene(tmp_path)
+    model = ViewerModel(path, renderer=CheckingRenderer())  # a scene path works too
+    model.final()
+    model.set_field("five")
+    model.final()
+    model.changed(camera=False)
+    assert model.editor.scalar_range == default_transfer_function(model.mesh).domain
+    lo, hi = model.editor.scalar_range
+    assert lo == 5.0 and hi > lo
+
+
+def test_model_rebuilds_its_renderer_when_the_settings_change(tmp_path, monkeypatch):
+    import tetvr.gl.renderer
+
+    made = []
+
+    class FakeRenderer(RecordingRenderer):
+        def __init__(self, settings=None):
+            super().__init__()
+            self.settings, self.released = settings, False
+            made.append(self)
+
+        def release(self):
+            self.released = True
+
+    monkeypatch.setattr(tetvr.gl.renderer, "Renderer", FakeRenderer)
+    scene = _scene(tmp_path)
+    model = ViewerModel(scene)
+    model.final()
+    model.load(scene)  # the same settings: the renderer is kept
+    model.final()
+    assert len(made) == 1 and not made[0].released
+    faster = dataclasses.replace(scene, settings=dataclasses.replace(scene.settings, sort="centroid"))
+    assert faster.settings != scene.settings
+    model.load(faster)
+    model.final()
+    assert len(made) == 2 and made[0].released and made[1].settings == faster.settings
+    # A renderer the caller gave is the caller's: kept whatever the settings.
+    rec = RecordingRenderer()
+    other = ViewerModel(scene, renderer=rec)
+    other.load(faster)
+    other.final()
+    assert other.renderer is rec and rec.calls
+
+
 @pytest.mark.gl
 def test_model_refined_frame_is_the_plain_render():
     scene = tetvr.load_scene(tetvr.demo_scene_path())
@@ -323,6 +395,56 @@ def test_viewer_widget(tmp_path):
     v.path.value = str(tmp_path / "saved.json")
     v._load()
     assert v.model.field == "pressure" and v.field.value == "pressure" and v.colormap.value == "(scene)"
+    v.close()
+
+
+def test_viewer_redraws_the_histogram_only_when_it_changes(tmp_path, monkeypatch):
+    pytest.importorskip("ipywidgets")
+    from tetvr.widget import Viewer
+
+    v = Viewer(_scene(tmp_path), renderer=RecordingRenderer(), clock=Clock())
+    drawn = []
+    real = TransferFunctionEditor.image
+    monkeypatch.setattr(TransferFunctionEditor, "image", lambda ed, *a, **k: drawn.append(1) or real(ed, *a, **k))
+    v.handle_mouse({"type": "mousedown", "relativeX": 10, "relativeY": 10})
+    for x in (20, 30, 40):
+        v.handle_mouse({"type": "mousemove", "relativeX": x, "relativeY": 12, "buttons": 1})
+    v.handle_mouse({"type": "wheel", "deltaY": -3})
+    v.refine()
+    assert drawn == []  # camera moves and refinement leave the histogram as it is
+    before = v.hist.value
+    v.point_a.value = 0.77
+    assert len(drawn) == 1 and v.hist.value != before
+    v.point.value = 1 - v.point.value  # selecting another point redraws it (the red square moves)
+    assert len(drawn) == 2
+    v.close()
+
+
+def test_viewer_reset_acts_on_the_loaded_scene(tmp_path):
+    pytest.importorskip("ipywidgets")
+    import ipywidgets as w
+
+    from tetvr.widget import Viewer
+
+    v = Viewer(_scene(tmp_path), renderer=RecordingRenderer(), clock=Clock())
+    other = tmp_path / "other.json"
+    data = json.loads((tmp_path / "scene.json").read_text())
+    data["camera"] = {"fit": {"direction": [1, 0, 0]}}
+    other.write_text(json.dumps(data))
+    v.path.value = str(other)
+    v._load()
+    home = v.model.control.home
+    v.model.control.azimuth(30.0)
+
+    def buttons(widget):
+        if isinstance(widget, w.Button):
+            yield widget
+        for child in getattr(widget, "children", ()):
+            yield from buttons(child)
+
+    reset = next(b for b in buttons(v.widget) if b.description == "⟲")
+    reset.click()
+    assert v.model.camera == home == tetvr.load_scene(other).camera
     v.close()
 
 

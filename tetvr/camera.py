@@ -53,6 +53,17 @@ def _flag(value: Any, name: str) -> bool:
     raise ValueError(f"{name} must be true or false, got {value!r}")
 
 
+def bounding_sphere(bounds: Any) -> tuple[NDArray[np.float64], float]:
+    """``(centre, radius)`` of the sphere around a ``(2, 3)`` box ``(lo, hi)`` (radius at
+    least 1e-30, so a point-sized box still has one).
+
+    >>> bounding_sphere([(0, 0, 0), (2, 0, 0)])
+    (array([1., 0., 0.]), 1.0)
+    """
+    lo, hi = np.asarray(bounds, dtype=np.float64).reshape(2, 3)
+    return 0.5 * (lo + hi), max(0.5 * float(np.linalg.norm(hi - lo)), 1e-30)
+
+
 @dataclasses.dataclass(frozen=True)
 class Camera:
     """A pinhole or parallel camera.
@@ -128,9 +139,7 @@ class Camera:
 
         The bounding sphere of the mesh touches the view's shorter side (divided by ``zoom``).
         """
-        lo, hi = mesh.bounds
-        centre = 0.5 * (lo + hi)
-        radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-30)
+        centre, radius = bounding_sphere(mesh.bounds)
         d = np.asarray(_vec3(direction, "direction"))
         if not np.linalg.norm(d) > 0:
             raise ValueError("direction must not be the zero vector")

@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     p_cmp.add_argument("--mappers", default="pt,bunyk,zsweep", help="VTK mappers, comma-separated ('' for none)")
     p_cmp.add_argument("--views", type=int, default=5, help="view changes to time (default 5)")
     p_cmp.add_argument("--size", type=int, nargs=2, metavar=("W", "H"), help="image size (default: the scene's)")
-    p_info = sub.add_parser("info", help="describe a mesh file and the OpenGL context")
+    p_info = sub.add_parser("info", help="describe a mesh file (points, tets, field, range, bounds)")
     p_info.add_argument("mesh")
     p_view = sub.add_parser("view", help="open a scene in a desktop window (needs moderngl-window and a display)")
     p_view.add_argument("scene", help="scene JSON")

@@ -37,6 +37,7 @@ class MeshReport:
     scalar_source: str = "point"
     split_cells: tuple[tuple[str, int], ...] = ()  # non-tet volume cells split into tets (tetvr.cells)
     steiner_points: int = 0  # cell centroids added where a cell could not be split otherwise
+    fields: tuple[str, ...] = ()  # the file's point fields, then its cell fields (by :func:`read`)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -286,7 +287,8 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
         )
     mesh = TetMesh.from_arrays(m.points, tets, values, scalar_name=scalars)
     report = dataclasses.replace(mesh.report, ignored_cells=m.split.ignored, scalar_source=source,
-                                 split_cells=m.split.split, steiner_points=m.split.steiner_points)
+                                 split_cells=m.split.split, steiner_points=m.split.steiner_points,
+                                 fields=tuple(point_names) + tuple(n for n in cell_names if n not in m.point_data))
     return dataclasses.replace(mesh, report=report)
 
 

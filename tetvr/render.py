@@ -25,14 +25,24 @@ GPU_SCALAR_LIMIT = 1e37
 GPU_MIN_RELATIVE_RANGE = 1e-5
 
 
+def _tf_range(lo: float, hi: float) -> tuple[float, float]:
+    """A field's range ``(lo, hi)`` as a transfer function's range the GPU can resolve.
+
+    A constant field, or one whose variation float32 cannot resolve, gets a small interval
+    above ``lo``, wide enough that the GPU's float32 scalars (~6e-8 relative rounding) stay
+    near its start (1e-6 would be only ~15 float32 steps); other ranges are kept.
+
+    >>> _tf_range(5.0, 5.0), _tf_range(0.0, 0.0), _tf_range(1.0, 2.0)
+    ((5.0, 5.005), (0.0, 0.001), (1.0, 2.0))
+    """
+    if hi - lo <= GPU_MIN_RELATIVE_RANGE * max(abs(lo), abs(hi)):
+        hi = lo + max(abs(lo), 1.0) * 1e-3
+    return lo, hi
+
+
 def default_transfer_function(mesh: TetMesh, *, preset: str = "viridis", opacity: float = 0.5) -> TransferFunction:
     """A preset over the mesh's scalar range; unit distance 1/20 of the mesh's diagonal."""
-    lo, hi = mesh.scalar_range
-    if hi - lo <= GPU_MIN_RELATIVE_RANGE * max(abs(lo), abs(hi)):
-        # A constant field, or one whose variation float32 cannot resolve: a small interval
-        # above it, wide enough that the GPU's float32 scalars (~6e-8 relative rounding)
-        # stay near its start (1e-6, as before, was only ~15 float32 steps).
-        hi = lo + max(abs(lo), 1.0) * 1e-3
+    lo, hi = _tf_range(*mesh.scalar_range)
     diag = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
     return TransferFunction.preset(preset, (lo, hi), opacity=opacity, unit_distance=max(diag / 20.0, 1e-30))
 
@@ -62,7 +72,7 @@ def render(
     Examples
     --------
     >>> import tetvr                                           # doctest: +SKIP
-    >>> image = tetvr.render(tetvr.read("mesh.vtu"), size=(256, 256))
+    >>> image = tetvr.render(tetvr.read("mesh.vtu"), size=(256, 256))  # doctest: +SKIP
     """
     if not isinstance(mesh, TetMesh):
         raise TypeError(f"mesh must be a TetMesh (see tetvr.read), got {type(mesh).__name__}")

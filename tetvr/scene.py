@@ -31,8 +31,9 @@ from typing import Any
 import numpy as np
 
 from .camera import Camera
+from .image import image_size
 from .mesh import TetMesh, read
-from .render import GPU_MIN_RELATIVE_RANGE, default_transfer_function
+from .render import _tf_range, default_transfer_function
 from .settings import RenderSettings
 from .transfer import TransferFunction
 
@@ -128,11 +129,10 @@ def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
 
 
 def _int_pair(value: Any) -> tuple[int, int]:
-    ok = (isinstance(value, (list, tuple)) and len(value) == 2
-          and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 1 for v in value))
-    if not ok:
-        raise ValueError(f"scene 'size' must be [width, height], two positive integers, got {value!r}")
-    return int(value[0]), int(value[1])
+    try:
+        return image_size(value)
+    except ValueError:
+        raise ValueError(f"scene 'size' must be [width, height], two positive integers, got {value!r}") from None
 
 
 def _background(value: Any) -> tuple[float, float, float]:
@@ -156,9 +156,7 @@ def _transfer_function(spec: dict[str, Any], mesh: TetMesh) -> TransferFunction:
     base = default_transfer_function(mesh)
     rng = spec.get("range")
     if rng is None:
-        rng = mesh.scalar_range
-        if rng[1] - rng[0] <= GPU_MIN_RELATIVE_RANGE * max(abs(rng[0]), abs(rng[1])):
-            rng = base.domain  # a (numerically) constant field: the default function's small range
+        rng = _tf_range(*mesh.scalar_range)  # a (numerically) constant field: a small range above it
     elif not (isinstance(rng, (list, tuple)) and len(rng) == 2):
         raise ValueError(f"transfer_function 'range' must be [lo, hi] or null, got {rng!r}")
     # 0 is not "unset": only null takes the default (TransferFunction rejects 0).

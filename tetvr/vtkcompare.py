@@ -50,6 +50,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from .animate import azimuth
 from .camera import Camera
 from .image import psnr, rmse, write_png
 from .mesh import TetMesh
@@ -448,13 +449,9 @@ def _serve(in_fd: int, out_fd: int) -> None:
 
 # ---------------------------------------------------------------------------- helpers
 def orbit(camera: Camera, degrees: float) -> Camera:
-    """The camera turned about its view-up axis through the focal point (vtkCamera.Azimuth)."""
-    axis = np.asarray(camera.view_up, dtype=np.float64)
-    axis /= np.linalg.norm(axis)
-    p = np.asarray(camera.position) - np.asarray(camera.focal_point)
-    a = math.radians(degrees)
-    rotated = (p * math.cos(a) + np.cross(axis, p) * math.sin(a) + axis * (axis @ p) * (1 - math.cos(a)))
-    return dataclasses.replace(camera, position=tuple(np.asarray(camera.focal_point) + rotated))
+    """The camera turned about its view-up axis through the focal point (vtkCamera.Azimuth);
+    :func:`tetvr.animate.azimuth`."""
+    return azimuth(camera, degrees)
 
 
 def quantize8(image: NDArray[np.floating[Any]]) -> NDArray[np.float32]:

@@ -35,10 +35,11 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .camera import Camera
+from .camera import Camera, bounding_sphere
 from .image import png_bytes as _png_bytes
 from .image import to_rgba8
 from .mesh import TetMesh
+from .render import _tf_range
 from .scene import Scene, load_scene
 from .settings import RenderSettings
 from .transfer import PRESETS, TransferFunction
@@ -94,6 +95,7 @@ class OrbitControl:
         self.home = camera
         self.camera = camera
         self.bounds = None if bounds is None else np.asarray(bounds, dtype=np.float64).reshape(2, 3)
+        self._sphere = None if self.bounds is None else bounding_sphere(self.bounds)
         self.degrees_per_pixel = float(degrees_per_pixel)
 
     def reset(self) -> Camera:
@@ -165,10 +167,9 @@ class OrbitControl:
 
     def _clipped(self, cam: Camera) -> Camera:
         """Clipping range around the bounding sphere of ``bounds`` (as Camera.fit makes it)."""
-        if self.bounds is None:
+        if self._sphere is None:
             return cam
-        centre = self.bounds.mean(axis=0)
-        radius = max(0.5 * float(np.linalg.norm(self.bounds[1] - self.bounds[0])), 1e-30)
+        centre, radius = self._sphere
         depth = float(np.dot(centre - np.asarray(cam.position), np.asarray(cam.direction)))
         far = depth + 1.05 * radius
         near = depth - 1.05 * radius
@@ -293,13 +294,10 @@ def histogram_image(values: ArrayLike, tf: TransferFunction, scalar_range: tuple
     img[..., :3] = np.where(bars[..., None], (0.35 + 0.65 * rgb[None, :, :]).astype(np.float32), img[..., :3])
     # Opacity curve: y = a, 2 px thick with a dark rim so it reads over any bar colour.
     y = np.clip(np.round((1.0 - alpha) * (h - 3)).astype(int) + 1, 1, h - 2)
-    for col in range(w):
+    for col in range(w):  # each column: from the previous column's height to its own
         y0 = y[col] if col == 0 else y[col - 1]
         a, b = sorted((int(y0), int(y[col])))
         img[max(a - 1, 0):b + 2, col, :3] = 0.0
-    for col in range(w):
-        y0 = y[col] if col == 0 else y[col - 1]
-        a, b = sorted((int(y0), int(y[col])))
         img[a:b + 1, col, :3] = 1.0
     for i, (pt, pa) in enumerate(points):
         cx = int(round(float(pt) * (w - 1)))
@@ -457,7 +455,9 @@ def _range(r: Sequence[float]) -> tuple[float, float]:
 
 # ---------------------------------------------------------------- the model behind any front-end
 def list_fields(path: str | os.PathLike[str]) -> list[str]:
-    """Names of the point and cell fields of a mesh file (point fields first)."""
+    """Names of the point and cell fields of a mesh file (point fields first).
+
+    (A mesh from :func:`tetvr.read` knows them already: ``mesh.report.fields``.)"""
     import meshio
 
     m = meshio.read(os.fspath(path))
@@ -469,15 +469,15 @@ class ViewerModel:
 
     Parameters
     ----------
-    scene : the scene to show (its size is the refined frame's size).
+    scene : the scene to show, or a scene JSON path (its size is the refined frame's size).
     renderer : anything with ``render(mesh, camera, tf, size=, order=)`` (default: a
         :class:`tetvr.gl.Renderer` made on the first frame and released by :meth:`close`).
     preview_scale, settle_s : see :class:`ProgressiveRefiner`.
     clock : the time source (tests pass a fake one).
     """
 
-    def __init__(self, scene: Scene, *, renderer: Any = None, preview_scale: float = 0.5, settle_s: float = 0.3,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, scene: Scene | str | os.PathLike[str], *, renderer: Any = None, preview_scale: float = 0.5,
+                 settle_s: float = 0.3, clock: Callable[[], float] = time.monotonic) -> None:
         self._renderer = renderer
         self._own_renderer = renderer is None
         self.clock = clock
@@ -494,6 +494,8 @@ class ViewerModel:
         """Show another scene (a :class:`Scene` or a scene JSON path)."""
         if not isinstance(scene, Scene):
             scene = load_scene(scene)
+        if self._renderer is not None and self._own_renderer and scene.settings != self.settings:
+            self.close()  # made with the old settings: the next frame makes one with the new
         self.mesh_path = scene.mesh_path
         self.mesh = scene.mesh
         self.field = scene.mesh.scalar_name
@@ -507,10 +509,8 @@ class ViewerModel:
         self.refiner = ProgressiveRefiner(self.size, preview_scale=self.preview_scale,  # type: ignore[arg-type]
                                           settle_s=self.settle_s)
         self.order = None
-        try:
-            self.fields = list_fields(self.mesh_path)
-        except Exception:  # noqa: BLE001 - a scene built in memory may have no file behind it
-            self.fields = [self.field]
+        # The fields tetvr.read found in the file; a mesh built in memory has only its own.
+        self.fields = list(scene.mesh.report.fields) or [self.field]
 
     def scene(self) -> Scene:
         """The current state as a :class:`Scene` (for :meth:`Scene.save` and ``tetvr render``)."""
@@ -536,16 +536,12 @@ class ViewerModel:
 
             self._meshes[name] = read(self.mesh_path, name)
         new = self._meshes[name]
-        if new.n_tets != self.mesh.n_tets:  # pragma: no cover - same file, same cells
-            self.refiner.invalidate_order()
-        # Keep the geometry object when only the field differs, so the order stays valid.
+        # Same file, same cells: the visibility order stays valid (render() sorts afresh
+        # should the number of tets differ).
         self.mesh = new
         self.field = name
         self.component = None
-        lo, hi = new.scalar_range
-        if hi <= lo:
-            hi = lo + max(abs(lo), 1.0) * 1e-6
-        self.editor.set_range(lo, hi)
+        self.editor.set_range(*_tf_range(*new.scalar_range))  # a constant field: as default_transfer_function
 
     def set_colormap(self, name: str) -> None:
         self.editor.set_colormap(name)
@@ -613,8 +609,6 @@ class Viewer:
             import ipywidgets as w
         except ImportError:
             raise ImportError("the Jupyter viewer needs ipywidgets: pip install ipywidgets") from None
-        if not isinstance(scene, Scene):
-            scene = load_scene(scene)
         self.model = ViewerModel(scene, renderer=renderer, preview_scale=preview_scale, settle_s=settle_s, clock=clock)
         self.step_degrees = float(step_degrees)
         self._timer: Any = None
@@ -637,13 +631,12 @@ class Viewer:
             button("▼", "orbit down", lambda: m.control.elevation(-self.step_degrees)),
             button("+", "zoom in", lambda: m.control.zoom(1.25)),
             button("−", "zoom out", lambda: m.control.zoom(0.8)),
-            button("⟲", "reset the camera", m.control.reset),
+            button("⟲", "reset the camera", lambda: m.control.reset()),  # the control load() made
         ])
         self.field = w.Dropdown(options=m.fields, value=m.field, description="field")
-        cmaps = [c for c in PICKER_COLORMAPS if c in PRESETS or _has_matplotlib()]
-        initial = m.editor.colormap or "(scene)"
-        self.colormap = w.Dropdown(options=(["(scene)"] if m.editor.colormap is None else []) + cmaps,
-                                   value=initial, description="colours")
+        cmaps = tuple(c for c in PICKER_COLORMAPS if c in PRESETS or _has_matplotlib())
+        options, initial = _colormap_choice(cmaps, m.editor.colormap)
+        self.colormap = w.Dropdown(options=options, value=initial, description="colours")
         self.unit = w.FloatLogSlider(value=m.editor.unit_distance, base=10,
                                      min=math.log10(m.editor.unit_distance) - 3,
                                      max=math.log10(m.editor.unit_distance) + 3, step=0.05,
@@ -683,6 +676,7 @@ class Viewer:
         self._mouse = self._attach_mouse()
         self._sync_points()
         self._show(m.final())
+        self._show_hist()
 
     # ---- display ----
     def _ipython_display_(self) -> None:  # pragma: no cover - needs a front-end
@@ -700,6 +694,10 @@ class Viewer:
         kind = "refined" if req is None or req.final else "preview"
         w, h = (req.size if req else m.size)
         self.status.value = f"{kind} {w}x{h}: {m.last_seconds * 1000:.0f} ms"
+
+    def _show_hist(self) -> None:
+        """Redraw the transfer-function picture (after an edit, not after a camera move)."""
+        m = self.model
         self.hist.value = png_bytes(m.editor.image(m.mesh.scalars, selected=self._selected), None)
 
     # ---- events ----
@@ -720,6 +718,7 @@ class Viewer:
             self.status.value = f"error: {exc}"
             return
         self._changed(camera=False)
+        self._show_hist()
 
     def _on_field(self, name: str) -> None:
         if self._syncing:
@@ -731,6 +730,7 @@ class Viewer:
             return
         self._sync_range()
         self._changed(camera=False)
+        self._show_hist()
 
     def _on_colormap(self, name: str) -> None:
         if name != "(scene)":
@@ -744,7 +744,7 @@ class Viewer:
             return
         self._selected = int(index)
         self._sync_points()
-        self.hist.value = png_bytes(self.model.editor.image(self.model.mesh.scalars, selected=self._selected), None)
+        self._show_hist()
 
     def _move(self, t: float | None = None, a: float | None = None) -> None:
         self._tf(lambda: self.model.editor.move_point(self._selected, t=t, a=a))
@@ -757,6 +757,7 @@ class Viewer:
         self._selected = ed.add_point(0.5 * (t0 + t1), 0.5 * (a0 + a1))
         self._sync_points()
         self._changed(camera=False)
+        self._show_hist()
 
     def _remove_point(self) -> None:
         try:
@@ -767,6 +768,7 @@ class Viewer:
         self._selected = max(self._selected - 1, 0)
         self._sync_points()
         self._changed(camera=False)
+        self._show_hist()
 
     def _sync_points(self) -> None:
         ed = self.model.editor
@@ -806,9 +808,10 @@ class Viewer:
         try:
             self.field.options = m.fields
             self.field.value = m.field
-            if m.editor.colormap is None and "(scene)" not in self.colormap.options:
-                self.colormap.options = ["(scene)", *self.colormap.options]
-            self.colormap.value = m.editor.colormap or "(scene)"
+            options, value = _colormap_choice(tuple(self.colormap.options), m.editor.colormap)
+            if options != tuple(self.colormap.options):
+                self.colormap.options = options
+            self.colormap.value = value
             self.unit.value = m.editor.unit_distance
         finally:
             self._syncing = False
@@ -816,6 +819,7 @@ class Viewer:
         self._selected = 0
         self._sync_points()
         self._show(m.final())
+        self._show_hist()
 
     # ---- refinement ----
     def refine(self) -> None:
@@ -883,6 +887,14 @@ class Viewer:
         self._cancel()
         self.model.close()
         self.widget.close()
+
+
+def _colormap_choice(options: tuple[str, ...], colormap: str | None) -> tuple[tuple[str, ...], str]:
+    """The colour picker's options and value for an editor's ``colormap``: explicit colour
+    rows (``None``) show as ``"(scene)"``, an entry added in front when missing."""
+    if colormap is None and "(scene)" not in options:
+        options = ("(scene)", *options)
+    return options, colormap or "(scene)"
 
 
 def _has_matplotlib() -> bool:
