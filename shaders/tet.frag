@@ -3,7 +3,7 @@
 // 3D pre-integration table (Kraus et al. 2004), and emits premultiplied RGBA for
 // back-to-front "over" blending (ONE, ONE_MINUS_SRC_ALPHA) into an RGBA32F target.
 //
-// In:  v_segment, v_exact_tet (see tet.vert); u_near, u_far, u_pixel_xy.
+// In:  v_segment, v_ray, v_exact_tet (see tet.vert); u_near, u_far.
 // Out: f_color, premultiplied.
 // The segment is clipped to the near and far planes here, per fragment, so tets that
 // cross them are cut rather than dropped. Defines (one program per combination):
@@ -15,11 +15,9 @@
 #include "lookup.glsl"
 
 noperspective in vec4 v_segment;
+noperspective in vec2 v_ray;  // eye-space x/depth, y/depth of the pixel's ray in perspective,
+                              // its eye-space x, y in parallel projection
 flat in int v_exact_tet;
-
-// gl_FragCoord.xy * xy + zw = NDC over the projection's scale: eye-space x/depth, y/depth
-// of the pixel's ray in perspective, its eye-space x, y in parallel projection.
-uniform vec4 u_pixel_xy;
 
 out vec4 f_color;
 
@@ -34,11 +32,10 @@ void exact_segment(int tet) {
         p[k] = (u_view * vec4(q.xyz, 1.0)).xyz;
         s[k] = q.w;
     }
-    vec2 xy = gl_FragCoord.xy * u_pixel_xy.xy + u_pixel_xy.zw;
 #if PERSPECTIVE
-    vec3 o = vec3(0.0), d = vec3(xy, -1.0);
+    vec3 o = vec3(0.0), d = vec3(v_ray, -1.0);
 #else
-    vec3 o = vec3(xy, 0.0), d = vec3(0.0, 0.0, -1.0);
+    vec3 o = vec3(v_ray, 0.0), d = vec3(0.0, 0.0, -1.0);
 #endif
     float t0 = u_near, t1 = u_far;
     for (int k = 0; k < 4; ++k) {
@@ -75,8 +72,7 @@ void main() {
 #if PERSPECTIVE_CORRECT
     zf = 1.0 / zf; sf *= zf; zb = 1.0 / zb; sb *= zb;
 #endif
-    vec2 xy = gl_FragCoord.xy * u_pixel_xy.xy + u_pixel_xy.zw;
-    float per_depth = sqrt(1.0 + dot(xy, xy));
+    float per_depth = sqrt(1.0 + dot(v_ray, v_ray));
 #else
     const float per_depth = 1.0;
 #endif

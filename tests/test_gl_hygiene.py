@@ -83,7 +83,8 @@ def test_gpu_bytes_counts_what_the_renderer_holds():
     mesh = synthetic.cube(2)
     with Renderer(RenderSettings(table_scalar_bins=32, table_thickness_slices=4)) as r:
         r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(16, 8))
-        expected = mesh.n_points * 16 + mesh.n_tets * (16 + 48 + 4) + 5 * 32 * 32 * 16 + 16 * 8 * 16
+        # points, tets + fans + order + fan indices (12 uint32 per tet), table, target
+        expected = (mesh.n_points * 16 + mesh.n_tets * (16 + 48 + 4 + 48) + 5 * 32 * 32 * 16 + 16 * 8 * 16)
         assert r.gpu_bytes() == expected
 
 

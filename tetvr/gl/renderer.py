@@ -32,6 +32,10 @@ __all__ = ["Renderer", "FrameStats"]
 _FAN_BYTES = 48  # sizeof(TetFan) in std430
 _GROUP = 64  # classify.comp local size
 _MAX_GROUPS = 65535
+#: Tets per draw call: the index buffer holds the fan pattern of this many (3 MiB).
+_DRAW_BATCH = 65_536
+#: tet.vert's fan of one tet: 4 triangles over its 5 vertices (0 the thick vertex).
+_FAN_PATTERN = np.array([0, 1, 2, 0, 2, 3, 0, 3, 4, 0, 4, 1], dtype=np.uint32)
 _DEFAULT_CHUNK = 2_000_000  # tets per draw: 96 MB of fans, under llvmpipe's 128 MB SSBO limit
 
 
@@ -94,6 +98,7 @@ class Renderer:
         self._centre = np.zeros(3)
         self._fans: Any = None
         self._order: Any = None
+        self._fan_indices: Any = None  # index buffer of _DRAW_BATCH fans, made on first draw
         self._table: PreintegrationTable | None = None  # the table in the texture
         self._table_cache: tuple[tuple[Any, ...], PreintegrationTable] | None = None  # table()'s last (key, table)
         self._table_tex: Any = None
@@ -123,7 +128,7 @@ class Renderer:
         self._vaos.clear()
         self._mesh_buffers = []
         self._targets.clear()
-        self._fans = self._order = self._table_tex = None
+        self._fans = self._order = self._table_tex = self._fan_indices = None
         self._mesh = None
         self._table = self._table_cache = None
         self.ctx.release()
@@ -131,14 +136,14 @@ class Renderer:
 
     def _gl_objects(self) -> list[Any]:
         objs = [*self._vaos.values(), *self._programs.values(), *self._mesh_buffers]
-        objs += [o for o in (self._fans, self._order, self._table_tex) if o is not None]
+        objs += [o for o in (self._fans, self._order, self._table_tex, self._fan_indices) if o is not None]
         for fbo in self._targets.values():
             objs += [fbo, *fbo.color_attachments]
         return objs
 
     def gpu_bytes(self) -> int:
         """Bytes of GPU memory held in this renderer's buffers, table and targets."""
-        total = sum(b.size for b in [*self._mesh_buffers, self._fans, self._order] if b is not None)
+        total = sum(b.size for b in [*self._mesh_buffers, self._fans, self._order, self._fan_indices] if b is not None)
         if self._table is not None:
             total += self._table.data.nbytes
         for (size, components, dtype) in self._targets:
@@ -287,7 +292,7 @@ class Renderer:
         near, far = camera.clipping_range
         proj = camera.projection_matrix(size[0] / size[1])
         return dict(u_view=view, u_proj=proj, u_perspective=0 if camera.parallel_projection else 1,
-                    u_near=near, u_far=far, u_pixel_xy=_pixel_xy(proj, size))
+                    u_near=near, u_far=far, u_ray_scale=(1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1])))
 
     def _classify(self, n_tets: int, uniforms: dict[str, Any]) -> None:
         """Run classify.comp over the tets in the tets buffer."""
@@ -314,12 +319,27 @@ class Renderer:
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func, self.ctx.blend_equation = blend
+        self._reserve_fans(min(n_tets, _DRAW_BATCH))
         vao = self._vaos.get(id(prog))
         if vao is None:
-            vao = self._vaos[id(prog)] = self.ctx.vertex_array(prog, [])
-        vao.render(moderngl.TRIANGLES, vertices=12 * n_tets)
+            vao = self._vaos[id(prog)] = self.ctx.vertex_array(prog, [], index_buffer=self._fan_indices,
+                                                               index_element_size=4)
+        for first in range(0, n_tets, _DRAW_BATCH):
+            set_uniforms(prog, u_first=first)
+            vao.render(moderngl.TRIANGLES, vertices=12 * min(_DRAW_BATCH, n_tets - first))
         self.ctx.disable(moderngl.BLEND)
         self._clock.lap("draw")
+
+    def _reserve_fans(self, n_tets: int) -> None:
+        """Make the index buffer hold the fan pattern of at least ``n_tets`` tets (the
+        vertex arrays that use it are remade with it)."""
+        if self._fan_indices is not None and self._fan_indices.size >= n_tets * _FAN_PATTERN.nbytes:
+            return
+        for obj in [*self._vaos.values(), *([self._fan_indices] if self._fan_indices is not None else [])]:
+            obj.release()
+        self._vaos.clear()
+        first = np.arange(max(n_tets, 1), dtype=np.uint32)[:, None] * 5
+        self._fan_indices = self.ctx.buffer((first + _FAN_PATTERN).tobytes())
 
     def _read(self, fbo: Any, size: tuple[int, int], components: int, dtype: str = "f4") -> NDArray[np.float32]:
         raw = fbo.read(components=components, dtype=dtype)
@@ -448,15 +468,6 @@ class Renderer:
         front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)
         back = np.where(ext[..., 1] >= 3e38, -np.inf, -ext[..., 1]).astype(np.float32)
         return front, back
-
-
-def _pixel_xy(proj: NDArray[np.float64], size: tuple[int, int]) -> tuple[float, float, float, float]:
-    """(a, b, c, d) with ``gl_FragCoord.xy * (a, b) + (c, d)`` = NDC divided by the
-    projection's scale (``proj``, the camera's projection matrix for this size): the
-    eye-space x and y per unit depth of the pixel's ray in perspective, its eye-space x
-    and y in parallel projection."""
-    sx, sy = float(proj[0, 0]), float(proj[1, 1])
-    return 2.0 / (size[0] * sx), 2.0 / (size[1] * sy), -1.0 / sx, -1.0 / sy
 
 
 def _outside_clipping_range(mesh: TetMesh, camera: Camera) -> tuple[bool, bool]:
