@@ -1,7 +1,8 @@
 // lookup.glsl -- the pre-integrated segment integral, read from the 3D table.
 //
-// Table: sampler3D with width = front scalar, height = back scalar, depth = thickness
-// slice (slice 0 = zero thickness, slices 1..K = d_min * base^(k-1)), linear
+// Table: sampler3D with width = thickness slice (slice 0 = zero thickness, slices 1..K =
+// d_min * base^(k-1)), height = front scalar, depth = back scalar (the slice varies fastest:
+// a trilinear fetch then reads nearby memory; tetvr.gl.util.table_texture), linear
 // filtering (TABLE_CUBIC 1: Catmull-Rom across slices instead). TABLE_NORMALIZED 1: RGB = colour per unit alpha, A = mean extinction, so
 // alpha = 1 - exp(-d A) is exact in d; 0: premultiplied RGBA (Kraus et al. 2004).
 // Returns premultiplied RGBA.
@@ -12,7 +13,7 @@
 uniform sampler3D u_table;
 uniform vec2 u_scalar_range;   // scalars of the first and last table node
 uniform float u_optical_scale; // stored A * u_optical_scale = extinction / ln 2 (for exp2)
-uniform vec3 u_table_size;     // (N, N, K + 1)
+uniform vec3 u_table_size;     // (N, N, K + 1): front scalar, back scalar, slice
 uniform vec4 u_lookup;         // scalar -> texel coordinate (scale, offset), its clamp (lo, hi)
 uniform vec4 u_slices;         // x = d / d_min -> texture z: 1 / d_min, then for x < 1: z = x * y + z,
 uniform vec2 u_slices_log;     // else z = log2(x) * u_slices.w + u_slices_log.x; z <= u_slices_log.y
@@ -33,11 +34,11 @@ vec4 lookup_segment(float sf, float sb, float d) {
     vec4 t = vec4(0.0);
     for (int i = 0; i < 4; ++i) {
         float k = clamp(k0 + float(i - 1), 0.0, u_table_size.z - 1.0);
-        t += w[i] * textureLod(u_table, vec3(st, (k + 0.5) / u_table_size.z), 0.0);
+        t += w[i] * textureLod(u_table, vec3((k + 0.5) / u_table_size.z, st), 0.0);
     }
     t = max(t, 0.0);
 #else
-    vec4 t = textureLod(u_table, vec3(st, z), 0.0);
+    vec4 t = textureLod(u_table, vec3(z, st), 0.0);
 #endif
 #if TABLE_NORMALIZED
     t.rgb = min(t.rgb, 1.0);

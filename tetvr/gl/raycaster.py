@@ -29,7 +29,7 @@ from ..transfer import TransferFunction
 from ..volume import Volume
 from .context import create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
-from .util import Clock, check_size, set_uniforms
+from .util import Clock, check_size, set_uniforms, table_texture
 
 __all__ = ["Raycaster", "RaycastStats", "MODES"]
 
@@ -233,15 +233,9 @@ class Raycaster:
     def _use_table(self, table: PreintegrationTable) -> None:
         if table is self._table:
             return
-        import moderngl
-
         if self._table_tex is not None:
             self._table_tex.release()
-        k1, n, _, _ = table.data.shape
-        tex = self.ctx.texture3d((n, n, k1), 4, np.ascontiguousarray(table.data).tobytes(), dtype="f4")
-        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
-        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self._table_tex = tex
+        self._table_tex = table_texture(self.ctx, table)
         self._table = table
 
     def _use_tf(self, tf: TransferFunction, scalar_range: tuple[float, float], n: int) -> None:

@@ -25,7 +25,7 @@ from ..sort import sort_with_stats
 from ..transfer import TransferFunction
 from .context import create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
-from .util import Clock, check_size, set_uniforms
+from .util import Clock, check_size, set_uniforms, table_texture
 
 __all__ = ["Renderer", "FrameStats"]
 
@@ -236,14 +236,7 @@ class Renderer:
             return
         if self._table_tex is not None:
             self._table_tex.release()
-        k1, n, _, _ = table.data.shape
-        dtype = "f4" if table.data.dtype == np.float32 else "f1"
-        tex = self.ctx.texture3d((n, n, k1), 4, np.ascontiguousarray(table.data).tobytes(), dtype=dtype)
-        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
-        import moderngl
-
-        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self._table_tex = tex
+        self._table_tex = table_texture(self.ctx, table)
         self._table = table
 
     def _use_target(self, size: tuple[int, int], components: int, dtype: str = "f4") -> Any:
