@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ._checks import check_instances
 from .camera import Camera
 from .mesh import TetMesh
 from .transfer import TransferFunction
@@ -118,12 +119,7 @@ def visible_cells(
     >>> stats.n_transparent > 0, stats.n_visible == len(ids)
     (True, True)
     """
-    if not isinstance(mesh, TetMesh):
-        raise TypeError(f"mesh must be a TetMesh, got {type(mesh).__name__}")
-    if not isinstance(camera, Camera):
-        raise TypeError(f"camera must be a Camera, got {type(camera).__name__}")
-    if not isinstance(tf, TransferFunction):
-        raise TypeError(f"tf must be a TransferFunction, got {type(tf).__name__}")
+    check_instances(mesh=(mesh, TetMesh), camera=(camera, Camera), tf=(tf, TransferFunction))
     margin = float(scalar_margin)
     if not (math.isfinite(margin) and margin >= 0):
         raise ValueError(f"scalar_margin must be a finite number >= 0, got {scalar_margin!r}")

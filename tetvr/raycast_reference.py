@@ -39,6 +39,7 @@ from typing import Any, Callable, Literal, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._checks import check_instances
 from .camera import Camera
 from .image import image_size
 from .reference import composite, integrate_segments
@@ -334,12 +335,7 @@ def render_volume_reference(
     >>> float(render_volume_reference(vol, cam, tf, (1, 1))[0, 0, 3]).__round__(6)  # a 7-unit slab at a = 0.5
     0.5
     """
-    if not isinstance(volume, Volume):
-        raise TypeError(f"volume must be a Volume, got {type(volume).__name__}")
-    if not isinstance(camera, Camera):
-        raise TypeError(f"camera must be a Camera, got {type(camera).__name__}")
-    if not isinstance(tf, TransferFunction):
-        raise TypeError(f"tf must be a TransferFunction, got {type(tf).__name__}")
+    check_instances(volume=(volume, Volume), camera=(camera, Camera), tf=(tf, TransferFunction))
     s = settings or RaycastSettings()
     width, height = image_size(size)
     fine = float(fine_step) if fine_step is not None else float(volume.spacing.min()) / 8.0

@@ -57,6 +57,7 @@ from typing import Callable, Iterator, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from ._checks import check_instances
 from .adjacency import FACE_VERTICES
 from .camera import Camera
 from .image import image_size
@@ -178,10 +179,7 @@ class _TetGeometry:
 
 
 def _validate(mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> tuple[int, int]:
-    if not isinstance(mesh, TetMesh):
-        raise TypeError(f"mesh must be a TetMesh, got {type(mesh).__name__}")
-    if not isinstance(camera, Camera):
-        raise TypeError(f"camera must be a Camera, got {type(camera).__name__}")
+    check_instances(mesh=(mesh, TetMesh), camera=(camera, Camera))
     return image_size(size)
 
 

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._checks import check_instances
 from ..camera import Camera
 from ..preintegrate import PreintegrationTable, table_for, table_scalar_range
 from ..raycast_reference import INTERPOLATIONS, RAYCAST_MODES, RaycastSettings, normalize_ray_limits
@@ -325,12 +326,7 @@ class Raycaster:
 
     def _render(self, volume: Volume, camera: Camera, tf: TransferFunction, size: tuple[int, int],
                 t_start: ArrayLike | None, t_end: ArrayLike | None, settings: RaycastSettings | None) -> NDArray[np.float32]:
-        if not isinstance(volume, Volume):
-            raise TypeError(f"volume must be a Volume, got {type(volume).__name__}")
-        if not isinstance(camera, Camera):
-            raise TypeError(f"camera must be a Camera, got {type(camera).__name__}")
-        if not isinstance(tf, TransferFunction):
-            raise TypeError(f"tf must be a TransferFunction, got {type(tf).__name__}")
+        check_instances(volume=(volume, Volume), camera=(camera, Camera), tf=(tf, TransferFunction))
         s = settings or self.settings
         width, height = check_size(size, self.ctx)
         clock = Clock(self.ctx, self.profile)

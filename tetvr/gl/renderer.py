@@ -32,11 +32,11 @@ __all__ = ["Renderer", "FrameStats"]
 _FAN_BYTES = 48  # sizeof(TetFan) in std430
 _GROUP = 64  # classify.comp local size
 _MAX_GROUPS = 65535
-#: Tets per draw call: the index buffer holds the fan pattern of this many (3 MiB).
+#: Most tets per draw call; the index buffer holds at most this many fan patterns (3 MiB).
 _DRAW_BATCH = 65_536
 #: tet.vert's fan of one tet: 4 triangles over its 5 vertices (0 the thick vertex).
 _FAN_PATTERN = np.array([0, 1, 2, 0, 2, 3, 0, 3, 4, 0, 4, 1], dtype=np.uint32)
-_DEFAULT_CHUNK = 2_000_000  # tets per draw: 96 MB of fans, under llvmpipe's 128 MB SSBO limit
+_DEFAULT_CHUNK = 2_000_000  # tets per chunk: 96 MB of fans, under llvmpipe's 128 MB SSBO limit
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,7 +98,7 @@ class Renderer:
         self._centre = np.zeros(3)
         self._fans: Any = None
         self._order: Any = None
-        self._fan_indices: Any = None  # index buffer of _DRAW_BATCH fans, made on first draw
+        self._fan_indices: Any = None  # index buffer of fan patterns (_reserve_fans), made on first draw
         self._table: PreintegrationTable | None = None  # the table in the texture
         self._table_cache: tuple[tuple[Any, ...], PreintegrationTable] | None = None  # table()'s last (key, table)
         self._table_tex: Any = None

@@ -1,13 +1,16 @@
-"""Small GL helpers shared by the renderers: size checks, uniforms, stage clocks."""
+"""Small GL helpers shared by the renderers: size checks, uniforms, the table texture, stage clocks."""
 
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..image import image_size
+
+if TYPE_CHECKING:
+    from ..preintegrate import PreintegrationTable
 
 __all__ = ["check_size", "set_uniforms", "table_texture", "Clock"]
 
@@ -21,7 +24,7 @@ def check_size(size: tuple[int, int], ctx: Any) -> tuple[int, int]:
     return width, height
 
 
-def table_texture(ctx: Any, table: Any) -> Any:
+def table_texture(ctx: Any, table: "PreintegrationTable") -> Any:
     """A 3D texture of a :class:`~tetvr.preintegrate.PreintegrationTable` for
     ``shaders/lookup.glsl``: linear filtering, clamped to the edge texels.
 
@@ -32,7 +35,7 @@ def table_texture(ctx: Any, table: Any) -> Any:
     import moderngl
 
     k1, n, _, _ = table.data.shape  # (slice, back, front, RGBA)
-    texels = np.ascontiguousarray(np.moveaxis(table.data, 0, 2))  # (back, front, slice, RGBA)
+    texels = np.moveaxis(table.data, 0, 2)  # (back, front, slice, RGBA); tobytes() lays it out in C order
     dtype = "f4" if texels.dtype == np.float32 else "f1"
     tex = ctx.texture3d((k1, n, n), 4, texels.tobytes(), dtype=dtype)
     tex.repeat_x = tex.repeat_y = tex.repeat_z = False
