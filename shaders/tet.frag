@@ -65,7 +65,8 @@ void main() {
         return;
     }
 #endif
-    // Front and back depth (along the view axis) and scalar of this pixel's segment.
+    // Front and back depth (along the view axis) and scalar, as a table texture
+    // coordinate (tet.vert), of this pixel's segment.
     float zf = v_segment.x, sf = v_segment.y, zb = v_segment.z, sb = v_segment.w;
     // World length per unit of depth along this pixel's ray.
 #if PERSPECTIVE
@@ -89,5 +90,5 @@ void main() {
     }
 #endif
     // Rounding can order a flat segment's ends the wrong way: its length is 0, not negative.
-    f_color = lookup_segment(sf, sb, max(zb - zf, 0.0) * per_depth);
+    f_color = lookup_table(vec2(sf, sb), max(zb - zf, 0.0) * per_depth);
 }

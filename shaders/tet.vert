@@ -9,14 +9,17 @@
 // repeats its first vertex in slot 4, which leaves the 4th triangle degenerate.
 //
 // In:  Fans, Order (back-to-front tet ids), Points, u_view, u_proj, u_perspective, u_first.
-// Out: noperspective v_segment = (1/w_f, s_f/w_f, 1/w_b, s_b/w_b), w the eye depth of the
-//      front and back points: both lie on one plane per fan triangle, where 1/w and s/w
-//      are affine in screen space, so interpolating them linearly and dividing is
-//      perspective-correct (Kraus et al. 2004). The front and back points lie on the
-//      pixel's ray, so their depths and scalars are all the fragment needs. Parallel
-//      projections (and PERSPECTIVE_CORRECT 0) interpolate (w_f, s_f, w_b, s_b) linearly.
+// Out: noperspective v_segment = (1/w_f, t_f/w_f, 1/w_b, t_b/w_b), w the eye depth of the
+//      front and back points and t their scalars as table texture coordinates (table_st
+//      in lookup.glsl, affine in the scalar): both points lie on one plane per fan
+//      triangle, where 1/w and t/w are affine in screen space, so interpolating them
+//      linearly and dividing is perspective-correct (Kraus et al. 2004). The front and
+//      back points lie on the pixel's ray, so their depths and scalars are all the
+//      fragment needs. Parallel projections (and PERSPECTIVE_CORRECT 0) interpolate
+//      (w_f, t_f, w_b, t_b) linearly.
 
 #include "common.glsl"
+#include "lookup.glsl"
 
 layout(std430, binding = 2) readonly buffer Fans { TetFan fans[]; };
 layout(std430, binding = 3) readonly buffer Order { uint order[]; };
@@ -69,11 +72,12 @@ void main() {
     vec4 clip = u_proj * vec4(front_eye, 1.0);
     emit(clip.xy / clip.w);
     float wf = -front_eye.z, wb = -back_eye.z;
+    vec2 st = table_st(vec2(sf, sb));
 #if PERSPECTIVE_CORRECT
     if (u_perspective == 1) {
-        v_segment = vec4(1.0 / wf, sf / wf, 1.0 / wb, sb / wb);
+        v_segment = vec4(1.0 / wf, st.x / wf, 1.0 / wb, st.y / wb);
         return;
     }
 #endif
-    v_segment = vec4(wf, sf, wb, sb);
+    v_segment = vec4(wf, st.x, wb, st.y);
 }

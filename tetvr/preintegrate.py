@@ -108,7 +108,7 @@ class PreintegrationTable:
         return dict(
             u_table=0, u_scalar_range=(lo, hi), u_optical_scale=self.alpha_scale / math.log(2.0),
             u_table_size=(n, n, k1),
-            u_lookup=(scale, 0.5 / n - lo * scale, 0.5 / n, (n - 0.5) / n),
+            u_lookup=(scale, 0.5 / n - lo * scale),
             # Texture z of the fractional slice s is (s + 0.5) / (K + 1); s = x below
             # x = d / d_min = 1, s = 1 + log2(x) / log2(base) above, at most K.
             u_slices=(1.0 / self.d_min, 1.0 / k1, 0.5 / k1, 1.0 / (math.log2(self.log_base) * k1)),
