@@ -16,7 +16,7 @@ uniform float u_optical_scale; // stored A * u_optical_scale = extinction / ln 2
 uniform vec3 u_table_size;     // (N, N, K + 1): front scalar, back scalar, slice
 uniform vec2 u_lookup;         // scalar -> texel coordinate: scale, offset (table_st)
 uniform vec4 u_slices;         // x = d / d_min -> texture z: 1 / d_min, then for x < 1: z = x * y + z,
-uniform vec2 u_slices_log;     // else z = log2(x) * u_slices.w + u_slices_log.x; z <= u_slices_log.y
+uniform float u_slices_log;    // else z = log2(x) * u_slices.w + u_slices_log
 
 // Texture coordinates of a (front, back) scalar pair: node i sits at texel centre
 // (i + 0.5) / N. No clamp is needed: the texture clamps to its edge texels, and those are
@@ -30,9 +30,10 @@ vec2 table_st(vec2 s) {
 // The segment with texture coordinates st (table_st) and world length d.
 vec4 lookup_table(vec2 st, float d) {
     // Slice 0 is zero thickness, slice k >= 1 is d_min * base^(k - 1), linear below d_min;
-    // z is the texture coordinate of the fractional slice, (slice + 0.5) / (K + 1).
+    // z is the texture coordinate of the fractional slice, (slice + 0.5) / (K + 1). Beyond
+    // the thickest slice (z > (K + 0.5) / (K + 1)) the texture clamps to that slice.
     float x = d * u_slices.x;
-    float z = min(x < 1.0 ? x * u_slices.y + u_slices.z : log2(x) * u_slices.w + u_slices_log.x, u_slices_log.y);
+    float z = x < 1.0 ? x * u_slices.y + u_slices.z : log2(x) * u_slices.w + u_slices_log;
 #if defined(TABLE_CUBIC) && TABLE_CUBIC
     // Catmull-Rom along the thickness axis: four slices, each read at its texel centre.
     float slice = z * u_table_size.z - 0.5;
@@ -44,12 +45,15 @@ vec4 lookup_table(vec2 st, float d) {
         float k = clamp(k0 + float(i - 1), 0.0, u_table_size.z - 1.0);
         t += w[i] * textureLod(u_table, vec3((k + 0.5) / u_table_size.z, st), 0.0);
     }
-    t = max(t, 0.0);
+    t = max(t, 0.0);  // Catmull-Rom can overshoot the nodes
+#if TABLE_NORMALIZED
+    t.rgb = min(t.rgb, 1.0);
+#endif
 #else
     vec4 t = textureLod(u_table, vec3(z, st), 0.0);
 #endif
 #if TABLE_NORMALIZED
-    t.rgb = min(t.rgb, 1.0);
+    // Linear filtering stays within the nodes' colours, which the table keeps in [0, 1].
     float alpha = 1.0 - exp2(-d * t.a * u_optical_scale);
     return vec4(t.rgb * alpha, alpha);
 #else

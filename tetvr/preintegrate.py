@@ -110,9 +110,9 @@ class PreintegrationTable:
             u_table_size=(n, n, k1),
             u_lookup=(scale, 0.5 / n - lo * scale),
             # Texture z of the fractional slice s is (s + 0.5) / (K + 1); s = x below
-            # x = d / d_min = 1, s = 1 + log2(x) / log2(base) above, at most K.
+            # x = d / d_min = 1, s = 1 + log2(x) / log2(base) above (the texture clamps it to K).
             u_slices=(1.0 / self.d_min, 1.0 / k1, 0.5 / k1, 1.0 / (math.log2(self.log_base) * k1)),
-            u_slices_log=(1.5 / k1, (self.n_slices + 0.5) / k1),
+            u_slices_log=1.5 / k1,
         )
 
     def slice_coordinate(self, thickness: NDArray[np.float64]) -> NDArray[np.float64]:
