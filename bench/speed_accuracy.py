@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import statistics
 import sys
 import time
@@ -39,10 +40,21 @@ import tetvr  # noqa: E402
 from tetvr import Camera, RenderSettings, TransferFunction, synthetic  # noqa: E402
 from tetvr.reference import render_reference  # noqa: E402
 from tetvr.settings import SORT_METHODS  # noqa: E402
-from tetvr.sort import SORTERS  # noqa: E402
+from tetvr.sort import SORTERS, auto_method  # noqa: E402
 from tetvr.stability import CASES, case  # noqa: E402
 
 DEFAULT = RenderSettings()
+#: Small scenes are timed for more rounds: until the default's frames add up to this...
+MIN_TIMED_S = 1.5
+#: ... in at most this many rounds.
+MAX_REPEATS = 40
+#: The table-size sweep (``table_convergence`` in the JSON): scalar bins N and
+#: (slices K, log base) pairs from coarse to fine, each combination against the reference.
+SWEEP_BINS = (128, 256, 512, 1024)
+SWEEP_SLICES = ((8, 2.5), (16, 1.6), (24, 1.4), (32, 1.3), (48, 1.2))
+#: ... skipping tables above this many entries N * N * K (the build's float64 temporaries
+#: take ~100 bytes per entry).
+SWEEP_MAX_ENTRIES = 1024 * 1024 * 16
 
 
 def variants() -> dict[str, RenderSettings]:
@@ -106,8 +118,15 @@ def time_variants(renderers, mesh, camera, tf, size, repeats):
     """Frame times of every variant, measured in interleaved rounds so that a change in
     the machine's load hits all variants alike. Returns images and, per variant, the
     median wall time and the median CPU time of the process (llvmpipe's threads
-    included), which other processes' load inflates less than wall time."""
+    included), which other processes' load inflates less than wall time.
+
+    Small scenes get more rounds, until the default's frames add up to MIN_TIMED_S (at
+    most MAX_REPEATS): with a handful of 5 ms frames, 5 % differences are chance."""
     images = {key: r.render(mesh, camera, tf, size=size) for key, r in renderers.items()}  # warm-up
+    t1 = time.perf_counter()
+    images["default"] = renderers["default"].render(mesh, camera, tf, size=size)
+    one = time.perf_counter() - t1
+    repeats = max(repeats, min(MAX_REPEATS, math.ceil(MIN_TIMED_S / max(one, 1e-6))))
     wall = {key: [] for key in renderers}
     cpu = {key: [] for key in renderers}
     for _ in range(repeats):
@@ -119,7 +138,17 @@ def time_variants(renderers, mesh, camera, tf, size, repeats):
             # Per view change: drop the cached table lookup and the (no-op) mesh upload.
             wall[key].append(t1 - t0 - st.table - st.upload)
             cpu[key].append(c1 - c0)
-    return images, {k: statistics.median(v) for k, v in wall.items()}, {k: statistics.median(v) for k, v in cpu.items()}
+    return (images, {k: statistics.median(v) for k, v in wall.items()},
+            {k: statistics.median(v) for k, v in cpu.items()}, repeats)
+
+
+def same_as_default(vs: dict[str, RenderSettings], mesh) -> dict[str, str]:
+    """Variants that are the default itself on this mesh once ``sort="auto"`` is resolved
+    (e.g. ``sort=xmpvo`` where auto picks xmpvo): timing them again only adds noise, and
+    one of two identical settings would "beat" the other by chance."""
+    resolved = dataclasses.replace(DEFAULT, sort=auto_method(mesh)) if DEFAULT.sort == "auto" else DEFAULT
+    return {key: f"identical to the default here (sort=auto picks {resolved.sort})"
+            for key, s in vs.items() if key != "default" and s == resolved}
 
 
 def table_times(vs, mesh, tf) -> dict[str, float]:
@@ -142,6 +171,28 @@ def table_times(vs, mesh, tf) -> dict[str, float]:
                 runs.append(time.process_time() - c0)
             seen[sig] = statistics.median(runs)
         out[key] = seen[sig]
+    return out
+
+
+def table_sweep(mesh, camera, tf, size, ref) -> list[dict[str, float]]:
+    """PSNR of every table size in SWEEP_BINS x SWEEP_SLICES (the default's other settings),
+    and its uncached build time: where each scene's table error comes from."""
+    from tetvr.preintegrate import build_table
+
+    out = []
+    for n_bins in SWEEP_BINS:
+        for k, base in SWEEP_SLICES:
+            if n_bins * n_bins * k > SWEEP_MAX_ENTRIES:
+                continue
+            s = dataclasses.replace(DEFAULT, table_scalar_bins=n_bins, table_thickness_slices=k, table_log_base=base)
+            with tetvr.Renderer(s) as r:
+                img = r.render(mesh, camera, tf, size=size)
+                t = r.table(mesh, tf)
+            c0 = time.process_time()
+            build_table(tf, t.scalar_range, t.d_max, n_bins=n_bins, n_slices=k, log_base=base,
+                        encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics)
+            out.append({"n_bins": n_bins, "n_slices": k, "log_base": base, "table_s": time.process_time() - c0,
+                        "table_mib": n_bins * n_bins * (k + 1) * 16 / 2**20, **errors(img, ref)})
     return out
 
 
@@ -184,10 +235,12 @@ def main(argv=None) -> int:
             t0 = time.perf_counter()
             ref = render_reference(mesh, cam, tf, size)
             ref_time = time.perf_counter() - t0
-            images, wall, cpu = time_variants(renderers, mesh, cam, tf, size, repeats)
-            tables = table_times(vs, mesh, tf)
+            dup = same_as_default(vs, mesh)
+            timed = {key: r for key, r in renderers.items() if key not in dup}
+            images, wall, cpu, rounds = time_variants(timed, mesh, cam, tf, size, repeats)
+            tables = table_times({k: s for k, s in vs.items() if k not in dup}, mesh, tf)
             rows = {key: {"frame_s": cpu[key], "frame_wall_s": wall[key], "table_s": tables[key],
-                          **errors(images[key], ref)} for key in vs}
+                          **errors(images[key], ref)} for key in timed}
             np.save(out / "_tmp_default.npy", images["default"])
             np.save(out / "_tmp_premult.npy", images["premultiplied, uint8, screen-linear (VTK-like)"])
             front = pareto([(r["frame_s"], r["rmse"]) for r in rows.values()])
@@ -195,7 +248,9 @@ def main(argv=None) -> int:
             for (key, r), f, ft in zip(rows.items(), front, front_table):
                 r["pareto"] = f
                 r["pareto_with_table"] = ft
-            report["scenes"][name] = {"n_tets": mesh.n_tets, "reference_s": ref_time, "variants": rows}
+            report["scenes"][name] = {"n_tets": mesh.n_tets, "reference_s": ref_time, "rounds": rounds,
+                                      "variants": rows, "same_as_default": dup,
+                                      "table_convergence": table_sweep(mesh, cam, tf, size, ref)}
             _picture(out, name, ref)
             d = rows["default"]
             print(f"{name:28s} {mesh.n_tets:7d} tets  default {d['frame_s'] * 1e3:7.1f} ms  PSNR {d['psnr']:6.1f} dB  "
@@ -216,7 +271,8 @@ def main(argv=None) -> int:
             tmp.unlink()
     (out / "speed_accuracy.json").write_text(json.dumps(report, indent=1))
     _chart(report, out / "speed_accuracy.png")
-    print(f"wrote {out / 'speed_accuracy.json'} and {out / 'speed_accuracy.png'}")
+    _sweep_chart(report, out / "table_convergence.png")
+    print(f"wrote {out / 'speed_accuracy.json'}, {out / 'speed_accuracy.png'} and {out / 'table_convergence.png'}")
     return 0
 
 
@@ -267,6 +323,39 @@ def _chart(report: dict, path: Path) -> None:
     fig.suptitle(f"tetvr: speed vs accuracy at {report['size'][0]}x{report['size'][1]} "
                  f"({report.get('gl', {}).get('GL_RENDERER', '?')}); * default, o Pareto front, x dominated")
     fig.tight_layout(rect=(0, 0.08 + 0.02 * (len(names) // 4), 1, 0.96))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _sweep_chart(report: dict, path: Path) -> None:
+    """PSNR against scalar bins N, one line per (K, base), one panel per scene."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scenes = {k: v for k, v in report["scenes"].items() if v.get("table_convergence")}
+    if not scenes:
+        return
+    fig, axes = plt.subplots(1, len(scenes), figsize=(4.2 * len(scenes), 3.9), squeeze=False)
+    for ax, (scene, data) in zip(axes.flat, scenes.items()):
+        rows = data["table_convergence"]
+        for k, base in SWEEP_SLICES:
+            pts = sorted((r["n_bins"], r["psnr"]) for r in rows if (r["n_slices"], r["log_base"]) == (k, base))
+            ax.plot(*zip(*pts), marker="o", label=f"K={k}, base {base}")
+        d = DEFAULT
+        mine = [r["psnr"] for r in rows if (r["n_bins"], r["n_slices"], r["log_base"]) ==
+                (d.table_scalar_bins, d.table_thickness_slices, d.table_log_base)]
+        if mine:
+            ax.scatter([d.table_scalar_bins], mine, s=180, marker="*", color="black", zorder=3, label="default")
+        ax.set_xscale("log", base=2)
+        ax.set_xlabel("scalar bins N")
+        ax.set_ylabel("PSNR vs reference [dB]")
+        ax.set_title(scene, fontsize=10)
+        ax.grid(True, alpha=0.3)
+    axes.flat[0].legend(fontsize=7)
+    fig.suptitle("Where the table error comes from: PSNR by scalar bins N and thickness slices (K, log base)")
+    fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
