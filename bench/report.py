@@ -27,7 +27,7 @@ def main(argv: list[str]) -> int:
         for d in scenes.values():
             v = d["variants"].get(key)
             if v is None:
-                cells.append("–")
+                cells.append("= default (auto)" if key in d.get("same_as_default", {}) else "–")
                 continue
             cell = f"{v['psnr']:.1f} / {v['frame_s'] * 1e3:.0f}"
             if "table_s" in v:
@@ -42,9 +42,8 @@ def main(argv: list[str]) -> int:
     for s, d in scenes.items():
         cells = []
         for k in hapt:
-            v = d["variants"].get(k)
-            if v is not None:
-                cells.append(f"{v['max_error']:.3f}, {v['mean_error']:.5f}, {v['pct_over_1_255']:.2f} %")
+            v = d["variants"].get(k, d["variants"]["default"] if k in d.get("same_as_default", {}) else None)
+            cells.append("–" if v is None else f"{v['max_error']:.3f}, {v['mean_error']:.5f}, {v['pct_over_1_255']:.2f} %")
         print(f"| {s} | " + " | ".join(cells) + " |")
     if r.get("stability"):
         print("\nStability cases (PSNR, dB, 96x96): the default and the worst variant\n")
@@ -53,6 +52,17 @@ def main(argv: list[str]) -> int:
         for n, d in r["stability"].items():
             worst = min(d, key=lambda k: d[k]["psnr"])
             print(f"| {n} | {d['default']['psnr']:.1f} | {worst}: {d[worst]['psnr']:.1f} |")
+    sweeps = {s: d["table_convergence"] for s, d in scenes.items() if d.get("table_convergence")}
+    if sweeps:
+        combos = sorted({(row["n_slices"], row["log_base"]) for rows in sweeps.values() for row in rows})
+        bins = sorted({row["n_bins"] for rows in sweeps.values() for row in rows})
+        print("\nTable-size sweep (PSNR, dB; rows: K slices at log base b; columns: scalar bins N):\n")
+        print("| scene | K, b | " + " | ".join(f"N={n}" for n in bins) + " |")
+        print("|---|---|" + "---|" * len(bins))
+        for s, rows in sweeps.items():
+            for k, b in combos:
+                got = {row["n_bins"]: row["psnr"] for row in rows if (row["n_slices"], row["log_base"]) == (k, b)}
+                print(f"| {s} | {k}, {b} | " + " | ".join(f"{got[n]:.1f}" if n in got else "–" for n in bins) + " |")
     return 0
 
 
