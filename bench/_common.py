@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import math
 import os
 import platform
 import warnings
@@ -96,3 +97,14 @@ def loadavg() -> list[float] | None:
         return [round(x, 2) for x in os.getloadavg()]
     except (OSError, AttributeError):  # AttributeError: not on Unix
         return None
+
+
+#: Small meshes and scenes are timed until their frames add up to this many seconds...
+MIN_TIMED_S = 1.5
+
+
+def timed_repeats(frame_s: float, at_least: int, at_most: int) -> int:
+    """How many timed frames a benchmark takes: at least ``at_least``, and for fast frames
+    more, until they add up to MIN_TIMED_S, but no more than ``at_most`` (with a handful of
+    5 ms frames, 5 % differences are chance)."""
+    return max(at_least, min(at_most, math.ceil(MIN_TIMED_S / max(frame_s, 1e-6))))

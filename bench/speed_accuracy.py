@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import statistics
 import sys
 import time
@@ -34,7 +33,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from _common import REAL_MESHES, TETS_DATA, load_quiet, machine  # noqa: E402
+from _common import REAL_MESHES, TETS_DATA, load_quiet, machine, timed_repeats  # noqa: E402
 
 import tetvr  # noqa: E402
 from tetvr import Camera, RenderSettings, TransferFunction, synthetic  # noqa: E402
@@ -44,9 +43,8 @@ from tetvr.sort import SORTERS, auto_method  # noqa: E402
 from tetvr.stability import CASES, case  # noqa: E402
 
 DEFAULT = RenderSettings()
-#: Small scenes are timed for more rounds: until the default's frames add up to this...
-MIN_TIMED_S = 1.5
-#: ... in at most this many rounds.
+#: Small scenes are timed for more rounds (until the default's frames add up to
+#: MIN_TIMED_S), at most this many.
 MAX_REPEATS = 40
 #: The table-size sweep (``table_convergence`` in the JSON): scalar bins N and
 #: (slices K, log base) pairs from coarse to fine, each combination against the reference.
@@ -126,7 +124,7 @@ def time_variants(renderers, mesh, camera, tf, size, repeats):
     t1 = time.perf_counter()
     images["default"] = renderers["default"].render(mesh, camera, tf, size=size)
     one = time.perf_counter() - t1
-    repeats = max(repeats, min(MAX_REPEATS, math.ceil(MIN_TIMED_S / max(one, 1e-6))))
+    repeats = timed_repeats(one, repeats, MAX_REPEATS)
     wall = {key: [] for key in renderers}
     cpu = {key: [] for key in renderers}
     for _ in range(repeats):

@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import functools
-import math
 import os
 import statistics
 import sys
@@ -48,6 +47,7 @@ from _common import (
     load_quiet,
     loadavg,
     machine,
+    timed_repeats,
     write_json,
 )
 from tqdm import tqdm
@@ -69,9 +69,7 @@ GEOMETRY_SIZE = (16, 16)
 OPACITY = 0.5
 #: Per-view stages, in pipeline order; their sum is the per-view frame total.
 VIEW_STAGES = ("classify", "sort", "order_upload", "draw", "readback")
-#: Small meshes get more repeats: until their tet frames add up to this many seconds...
-MIN_TIMED_S = 1.5
-#: ... but no more than this many.
+#: Small meshes get more repeats (until their tet frames add up to MIN_TIMED_S), at most this many.
 MAX_REPEATS = 60
 #: Meshes above this many tets get fewer repeats (a 1M-tet frame takes seconds on llvmpipe).
 BIG_TETS = 500_000
@@ -160,9 +158,8 @@ def bench_mesh(renderer: Any, name: str, mesh: TetMesh, repeats: int, bar: tqdm)
                     "max_alpha": float(alpha.max())}
     _frame(renderer, mesh, cam, tf, "floor")  # warm-up of the floor's path
     bar.update(2)
-    # Small meshes render in tens of ms, where a few repeats leave the ratio to chance:
-    # repeat until the tet frames alone add up to MIN_TIMED_S (at most MAX_REPEATS).
-    extra = max(0, min(MAX_REPEATS, math.ceil(MIN_TIMED_S / max(first["total"], 1e-6))) - repeats)
+    # Small meshes render in tens of ms, where a few repeats leave the ratio to chance.
+    extra = timed_repeats(first["total"], repeats, MAX_REPEATS) - repeats
     if extra:
         repeats += extra
         bar.total += 4 * extra
