@@ -41,6 +41,7 @@ from tetvr.reference import render_reference  # noqa: E402
 from tetvr.settings import SORT_METHODS  # noqa: E402
 from tetvr.sort import SORTERS, auto_method  # noqa: E402
 from tetvr.stability import CASES, case  # noqa: E402
+from tetvr.tablesize import resolve as resolve_table_size  # noqa: E402
 
 DEFAULT = RenderSettings()
 #: Small scenes are timed for more rounds (until the default's frames add up to
@@ -63,6 +64,9 @@ def variants() -> dict[str, RenderSettings]:
     v["cubic thickness filter"] = dataclasses.replace(DEFAULT, table_filter="cubic")
     v["premultiplied table, cubic"] = dataclasses.replace(DEFAULT, table_encoding="premultiplied", table_filter="cubic")
     v["uint8 framebuffer"] = dataclasses.replace(DEFAULT, framebuffer="uint8")
+    v["fixed table N=256, K=16 (the 0.x default)"] = dataclasses.replace(
+        DEFAULT, table_scalar_bins=256, table_thickness_slices=16, table_log_base=1.6)
+    # One axis fixed, the other left to the "auto" size.
     for n in (64, 128, 512):
         v[f"N={n}"] = dataclasses.replace(DEFAULT, table_scalar_bins=n)
     for k, base in ((8, 2.5), (16, 2.0), (24, 1.4)):
@@ -140,33 +144,52 @@ def time_variants(renderers, mesh, camera, tf, size, repeats):
             {k: statistics.median(v) for k, v in cpu.items()}, repeats)
 
 
-def same_as_default(vs: dict[str, RenderSettings], mesh) -> dict[str, str]:
-    """Variants that are the default itself on this mesh once ``sort="auto"`` is resolved
-    (e.g. ``sort=xmpvo`` where auto picks xmpvo): timing them again only adds noise, and
-    one of two identical settings would "beat" the other by chance."""
-    resolved = dataclasses.replace(DEFAULT, sort=auto_method(mesh)) if DEFAULT.sort == "auto" else DEFAULT
-    return {key: f"identical to the default here (sort=auto picks {resolved.sort})"
-            for key, s in vs.items() if key != "default" and s == resolved}
+def resolved(s: RenderSettings, mesh, tf) -> RenderSettings:
+    """The settings with ``sort="auto"`` and an "auto" table size made concrete for this scene."""
+    size = resolve_table_size(s, tf, mesh)
+    return dataclasses.replace(s, sort=auto_method(mesh) if s.sort == "auto" else s.sort,
+                               table_scalar_bins=size.n_bins, table_thickness_slices=size.n_slices,
+                               table_log_base=round(size.log_base, 9), table_tolerance=1.0)
+
+
+def same_as_default(vs: dict[str, RenderSettings], mesh, tf) -> dict[str, str]:
+    """Variants that are the default itself in this scene once ``sort="auto"`` and the
+    "auto" table size are resolved (e.g. ``sort=xmpvo`` where auto picks xmpvo, ``N=512``
+    where the auto size is 512 bins): timing them again only adds noise, and one of two
+    identical settings would "beat" the other by chance."""
+    mine = resolved(DEFAULT, mesh, tf)
+    why = (f"identical to the default here (sort=auto picks {mine.sort}; the auto table is "
+           f"N={mine.table_scalar_bins}, K={mine.table_thickness_slices})")
+    return {key: why for key, s in vs.items() if key != "default" and resolved(s, mesh, tf) == mine}
 
 
 def table_times(vs, mesh, tf) -> dict[str, float]:
-    """CPU seconds to build each variant's pre-integration table (paid again on every
-    transfer-function change), built uncached: the median of 3 builds per distinct table."""
+    """CPU seconds to size (an "auto" size: :mod:`tetvr.tablesize`) and build each
+    variant's pre-integration table, both paid again on every transfer-function change;
+    uncached: the median of 3 runs per distinct setting. (The mesh's segment sample is
+    paid once per mesh, not per transfer function, and is not counted.)"""
     from tetvr.preintegrate import build_table, table_for
+    from tetvr.tablesize import _fine_table, segment_sample
 
+    segment_sample(mesh)
     seen: dict[tuple, float] = {}
     out = {}
     for key, st in vs.items():
-        params = dict(n_bins=st.table_scalar_bins, n_slices=st.table_thickness_slices, log_base=st.table_log_base,
-                      encoding=st.table_encoding, dtype=st.table_dtype, optics=st.optics)
-        sig = tuple(sorted(params.items()))
+        sig = (st.table_scalar_bins, st.table_thickness_slices, st.table_log_base, st.table_tolerance,
+               st.table_encoding, st.table_dtype, st.optics)
         if sig not in seen:
-            t = table_for(tf, mesh.scalar_range, mesh.max_edge, **params)  # the renderer's exact inputs
             runs = []
             for _ in range(3):
+                _fine_table.cache_clear()
                 c0 = time.process_time()
+                size = resolve_table_size(st, tf, mesh)
+                params = dict(n_bins=size.n_bins, n_slices=size.n_slices, log_base=size.log_base,
+                              encoding=st.table_encoding, dtype=st.table_dtype, optics=st.optics)
+                c1 = time.process_time()
+                t = table_for(tf, mesh.scalar_range, mesh.max_edge, **params)  # the renderer's exact inputs
+                c2 = time.process_time()
                 build_table(tf, t.scalar_range, t.d_max, **params)
-                runs.append(time.process_time() - c0)
+                runs.append(c1 - c0 + time.process_time() - c2)
             seen[sig] = statistics.median(runs)
         out[key] = seen[sig]
     return out
@@ -233,7 +256,7 @@ def main(argv=None) -> int:
             t0 = time.perf_counter()
             ref = render_reference(mesh, cam, tf, size)
             ref_time = time.perf_counter() - t0
-            dup = same_as_default(vs, mesh)
+            dup = same_as_default(vs, mesh, tf)
             timed = {key: r for key, r in renderers.items() if key not in dup}
             images, wall, cpu, rounds = time_variants(timed, mesh, cam, tf, size, repeats)
             tables = table_times({k: s for k, s in vs.items() if k not in dup}, mesh, tf)
@@ -246,12 +269,15 @@ def main(argv=None) -> int:
             for (key, r), f, ft in zip(rows.items(), front, front_table):
                 r["pareto"] = f
                 r["pareto_with_table"] = ft
+            auto = resolve_table_size(DEFAULT, tf, mesh)
             report["scenes"][name] = {"n_tets": mesh.n_tets, "reference_s": ref_time, "rounds": rounds,
+                                      "auto_table": {**dataclasses.asdict(auto), "error": auto.error},
                                       "variants": rows, "same_as_default": dup,
                                       "table_convergence": table_sweep(mesh, cam, tf, size, ref)}
             _picture(out, name, ref)
             d = rows["default"]
-            print(f"{name:28s} {mesh.n_tets:7d} tets  default {d['frame_s'] * 1e3:7.1f} ms  PSNR {d['psnr']:6.1f} dB  "
+            print(f"{name:28s} {mesh.n_tets:7d} tets  default (N={auto.n_bins}, K={auto.n_slices}) "
+                  f"{d['frame_s'] * 1e3:7.1f} ms  PSNR {d['psnr']:6.1f} dB  "
                   f"pareto={d['pareto']} (with table time: {d['pareto_with_table']})")
         for name in tqdm(sorted(CASES), desc="stability cases", leave=False):
             with warnings.catch_warnings():

@@ -195,29 +195,34 @@ def zero_opacity(tf: TransferFunction, lo: NDArray[np.float64], hi: NDArray[np.f
     return np.asarray((a_lo == 0) & (a_hi == 0) & (inside <= 0))
 
 
-def gpu_scalar_margin(mesh: TetMesh, tf: TransferFunction, settings: Any = None) -> float:
+def gpu_scalar_margin(mesh: TetMesh, tf: TransferFunction, settings: Any = None, *, n_bins: int | None = None) -> float:
     """The scalar margin under which culling leaves the GPU renderer's image unchanged.
 
-    Its pre-integration table has ``table_scalar_bins`` nodes spanning the union of the
-    mesh's range and the transfer function's domain (:func:`tetvr.preintegrate.table_for`);
-    a lookup filters between the two nodes around its scalar, which lie within one node
-    spacing. The extra 1 % covers float32 rounding of the texture coordinate.
+    Its pre-integration table has ``n_bins`` nodes (default: the settings'
+    ``table_scalar_bins``; for ``"auto"`` the fewest it may choose, the widest spacing)
+    spanning the union of the mesh's range and the transfer function's domain
+    (:func:`tetvr.preintegrate.table_for`); a lookup filters between the two nodes around
+    its scalar, which lie within one node spacing. The extra 1 % covers float32 rounding
+    of the texture coordinate.
     """
     from .settings import RenderSettings
+    from .tablesize import AUTO_BINS
 
-    settings = settings or RenderSettings()
+    if n_bins is None:
+        bins = (settings or RenderSettings()).table_scalar_bins
+        n_bins = min(AUTO_BINS) if bins == "auto" else int(bins)
     lo = min(mesh.scalar_range[0], tf.domain[0])
     hi = max(mesh.scalar_range[1], tf.domain[1])
-    return 1.01 * (hi - lo) / (settings.table_scalar_bins - 1)
+    return 1.01 * (hi - lo) / (n_bins - 1)
 
 
 def submesh(mesh: TetMesh, ids: NDArray[np.integer[Any]]) -> TetMesh:
     """The mesh restricted to the cells ``ids``, rendering like the whole.
 
     Points and scalars stay as they are (so the scalar range and the near-plane test do),
-    and so does :attr:`TetMesh.max_edge`, which sets the thickness axis of the
-    pre-integration table: the GPU renderer then builds the same table as for the whole
-    mesh. The cells keep their canonical (ascending) order.
+    and so do :attr:`TetMesh.max_edge`, which sets the thickness axis of the
+    pre-integration table, and the segment sample that sizes an "auto" table: the GPU
+    renderer then builds the same table as for the whole mesh. The cells keep their canonical (ascending) order.
     """
     idx = np.unique(np.asarray(ids, dtype=np.int64))
     if idx.size and (idx[0] < 0 or idx[-1] >= mesh.n_tets):
@@ -230,4 +235,8 @@ def submesh(mesh: TetMesh, ids: NDArray[np.integer[Any]]) -> TetMesh:
     # max_edge is a cached_property: seeding the instance's cache keeps the whole mesh's
     # value (a frozen dataclass refuses ordinary assignment).
     object.__setattr__(sub, "max_edge", mesh.max_edge)
+    # Likewise the segment sample that sizes an "auto" table (tetvr.tablesize).
+    from .tablesize import segment_sample
+
+    object.__setattr__(sub, "_segment_sample", segment_sample(mesh))
     return sub

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any, Literal
 
 import numpy as np
@@ -37,13 +38,21 @@ class RenderSettings:
         (MPVONC plus edges from rays through the boundary, right between separate and
         interlocking parts; see :mod:`tetvr.boundary`) or ``"none"`` (input order; only
         for measurements).
-    table_scalar_bins : N, samples of the scalar axis of the pre-integration table.
-    table_thickness_slices : K, thickness slices on the logarithmic axis.
-    table_log_base : ratio between consecutive thickness slices. The default 1.6 puts
-        K = 16 slices over thicknesses from d_max / 1150 to d_max; measured against the
-        reference it beats base 2 (a 33000x span) by up to 8 dB where colour changes
-        along thick opaque segments, and matches K = 24 slices at base 1.6 everywhere
-        (``bench/speed_accuracy.py``).
+    table_scalar_bins : N, samples of the scalar axis of the pre-integration table, or
+        ``"auto"`` (default): 256 or 512, whichever the scene needs (:mod:`tetvr.tablesize`
+        estimates each size's error from the transfer function and the mesh's cells).
+    table_thickness_slices : K, thickness slices on the logarithmic axis, or ``"auto"``
+        (default): 8, 15, 22, 29 or 43 slices over the span of 16 slices at
+        ``table_log_base``, the fewest the scene needs (most scenes: 8; thick, strongly
+        absorbing segments across colour changes: more).
+    table_log_base : ratio between consecutive thickness slices when K is given; with
+        ``"auto"`` slices, the thickness axis spans ``table_log_base ** 15``. The default
+        1.6 spans thicknesses from d_max / 1150 to d_max; measured against the reference
+        it beats base 2 (a 33000x span) by up to 8 dB where colour changes along thick
+        opaque segments (``bench/speed_accuracy.py``).
+    table_tolerance : the RMS per-segment error (premultiplied RGBA) an ``"auto"`` table
+        size aims for; the cheapest table estimated within it is used. The default 5e-5
+        keeps the benchmark scenes 85-105 dB from the reference (an 8-bit step is 3.9e-3).
     table_dtype : ``"float32"`` or ``"uint8"`` storage of the table.
     table_encoding : ``"normalized"`` stores colour/alpha and optical depth per unit
         length, so that alpha is exact in the thickness and only the (slowly varying)
@@ -68,12 +77,15 @@ class RenderSettings:
     --------
     >>> RenderSettings(table_scalar_bins=128).table_scalar_bins
     128
+    >>> RenderSettings().table_thickness_slices
+    'auto'
     """
 
     sort: Literal["auto", "centroid", "mpvo", "mpvonc", "xmpvo", "none"] = "auto"
-    table_scalar_bins: int = 256
-    table_thickness_slices: int = 16
+    table_scalar_bins: int | Literal["auto"] = "auto"
+    table_thickness_slices: int | Literal["auto"] = "auto"
     table_log_base: float = 1.6
+    table_tolerance: float = 5e-5
     table_dtype: Literal["float32", "uint8"] = "float32"
     table_encoding: Literal["normalized", "premultiplied"] = "normalized"
     table_filter: Literal["linear", "cubic"] = "linear"
@@ -97,9 +109,16 @@ class RenderSettings:
             raise ValueError(f"table_dtype must be one of {TABLE_DTYPES}, got {self.table_dtype!r}")
         for name, lo, hi in (("table_scalar_bins", 2, 2048), ("table_thickness_slices", 1, 256)):
             v = getattr(self, name)
+            if isinstance(v, str) and v == "auto":
+                continue
             if not isinstance(v, (int, np.integer)) or isinstance(v, (bool, np.bool_)) or not lo <= v <= hi:
-                raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
+                raise ValueError(f"{name} must be \"auto\" or an integer in [{lo}, {hi}], got {v!r}")
             object.__setattr__(self, name, int(v))
+        tol = self.table_tolerance
+        if (isinstance(tol, (str, bytes, bool, np.bool_)) or not isinstance(tol, (int, float, np.number))
+                or not math.isfinite(float(tol)) or not 0 < float(tol) <= 1):
+            raise ValueError(f"table_tolerance must be a number in (0, 1], got {tol!r}")
+        object.__setattr__(self, "table_tolerance", float(tol))
         if not isinstance(self.cull, (bool, np.bool_)):
             raise ValueError(f"cull must be True or False, got {self.cull!r}")
         if not isinstance(self.perspective_correct, (bool, np.bool_)):

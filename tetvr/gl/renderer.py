@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from ..camera import Camera
 from ..mesh import TetMesh
 from ..preintegrate import PreintegrationTable, table_for
+from ..tablesize import resolve as resolve_table_size, segment_sample
 from ..render import check_float32_range
 from ..settings import RenderSettings
 from ..cull import gpu_scalar_margin, visible_cells
@@ -266,13 +267,15 @@ class Renderer:
         reuses it whatever other renderers did to the shared cache of :func:`table_for`.
         """
         s = self.settings
-        options: dict[str, Any] = dict(n_bins=s.table_scalar_bins, n_slices=s.table_thickness_slices,
-                                       log_base=s.table_log_base, encoding=s.table_encoding,
-                                       dtype=s.table_dtype, optics=s.optics)
-        key = (tf, mesh.scalar_range, mesh.max_edge, *options.items())
+        auto = "auto" in (s.table_scalar_bins, s.table_thickness_slices)
+        # An "auto" size depends on the mesh's cells (its segment sample), not only on the
+        # scalar range and the longest edge.
+        key = (tf, mesh.scalar_range, mesh.max_edge, segment_sample(mesh) if auto else None)
         if self._table_cache is not None and self._table_cache[0] == key:
             return self._table_cache[1]
-        table = table_for(tf, mesh.scalar_range, mesh.max_edge, **options)
+        size = resolve_table_size(s, tf, mesh)
+        table = table_for(tf, mesh.scalar_range, mesh.max_edge, n_bins=size.n_bins, n_slices=size.n_slices,
+                          log_base=size.log_base, encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics)
         self._table_cache = (key, table)
         return table
 
@@ -391,7 +394,7 @@ class Renderer:
             if self.settings.cull:
                 # Sort everything, then filter: MPVONC constraints through culled cells hold.
                 keep, _ = visible_cells(mesh, camera, tf, size=size,
-                                        scalar_margin=gpu_scalar_margin(mesh, tf, self.settings))
+                                        scalar_margin=gpu_scalar_margin(mesh, tf, n_bins=table.n_bins))
                 mask = np.zeros(mesh.n_tets, dtype=bool)
                 mask[keep] = True
                 order_ids = order_ids[mask[order_ids]]
