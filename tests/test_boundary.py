@@ -12,7 +12,7 @@ from tetvr.adjacency import face_adjacency
 from tetvr.boundary import boundary_constraints
 from tetvr.image import psnr
 from tetvr.reference import render_reference
-from tetvr.sort import auto_method, mpvonc_order, sort_with_stats, xmpvo_order
+from tetvr.sort import auto_method, mpvonc_order, sort_with_stats, visibility_order, xmpvo_order
 
 
 def _shifted(mesh: TetMesh, offset) -> TetMesh:
@@ -133,3 +133,17 @@ def test_bad_grid(grid):
     mesh = synthetic.cube(1)
     with pytest.raises(ValueError, match="grid must be an integer >= 2"):
         boundary_constraints(mesh, Camera.fit(mesh), grid=grid)
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_mesh_without_boundary_faces(parallel):
+    """Two copies of one cell share every face, so there is no boundary to cast rays
+    through (found by tests/badinput/test_fuzz.py: the perspective branch reduced an empty
+    array). No constraints, no error, and every visibility order still takes both cells."""
+    a = synthetic.single_tet()
+    mesh = TetMesh.from_arrays(a.points, np.vstack([a.tets, a.tets]), a.scalars)
+    cam = Camera.fit(mesh, parallel=parallel)
+    c = boundary_constraints(mesh, cam, grid=16)
+    assert c.behind.size == 0 and c.front.size == 0
+    for method in ("xmpvo", "mpvonc", "mpvo", "centroid"):
+        assert sorted(visibility_order(mesh, cam, method).tolist()) == [0, 1]

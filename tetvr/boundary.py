@@ -126,7 +126,7 @@ def boundary_constraints(mesh: TetMesh, camera: Camera, *, grid: int | None = No
     else:
         facing = -c  # n . (eye - x) with the eye at the origin
         near = -p[:, :, 2].max(axis=1)  # smallest depth of the face's vertices
-        ok = (np.abs(facing) > 1e-9 * (np.abs(p).max(axis=(1, 2)) + 1e-300)) & (near > 1e-9 * np.abs(p).max())
+        ok = (np.abs(facing) > 1e-9 * (np.abs(p).max(axis=(1, 2)) + 1e-300)) & (near > 1e-9 * np.abs(p).max(initial=0.0))
     n_skipped = int(np.count_nonzero(~ok))
     p, n, c, cells, entering = p[ok], n[ok], c[ok], cells[ok], facing[ok] > 0
     empty = np.empty(0, dtype=np.int64)
