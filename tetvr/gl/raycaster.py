@@ -30,7 +30,7 @@ from ..transfer import TransferFunction
 from ..volume import Volume
 from .context import create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
-from .util import Clock, check_size, set_uniforms, table_texture
+from .util import Clock, GLOwner, check_size, set_uniforms, table_texture
 
 __all__ = ["Raycaster", "RaycastStats", "MODES"]
 
@@ -87,7 +87,7 @@ class RaycastStats:
         return self.upload + self.table + self.draw + self.readback
 
 
-class Raycaster:
+class Raycaster(GLOwner):
     """Renders image volumes on the GPU by ray casting; reuse one for many frames.
 
     Parameters
@@ -136,31 +136,17 @@ class Raycaster:
         self.last_stats = RaycastStats()
         self._released = False
 
-    # ---- lifetime ----
+    # ---- lifetime (GLOwner: release(), the context manager) ----
     def __enter__(self) -> "Raycaster":
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.release()
-
-    def release(self) -> None:
-        """Release every GL object (and the context, if this object made it). Safe twice."""
-        if self._released:
-            return
-        with self.ctx:  # make this context current: another one may have been made since
-            if self._fbo is not None:
-                self.ctx.detect_framebuffer(0).use()
-            for obj in self._gl_objects():
-                obj.release()
+    def _forget(self) -> None:
         self._programs.clear()
         self._vaos.clear()
         self._volume_tex = self._table_tex = self._tf_tex = self._limits_tex = None
         self._no_limits_tex = self._fbo = self._fbo_tex = None
         self._volume = self._gpu_volume = None
         self._table = None
-        if self._owns_ctx:
-            self.ctx.release()
-        self._released = True
 
     def _gl_objects(self) -> list[Any]:
         objs = [*self._vaos.values(), *self._programs.values()]
@@ -317,8 +303,7 @@ class Raycaster:
         -------
         (height, width, 4) float32 premultiplied RGBA, row 0 at the top.
         """
-        if self._released:
-            raise RuntimeError("this Raycaster has been released")
+        self._check_alive()
         # Creating a context makes it current; enter ours so that every call below
         # reaches it even when other contexts were created (or released) since.
         with self.ctx:

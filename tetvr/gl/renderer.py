@@ -26,7 +26,7 @@ from ..sort import sort_with_stats
 from ..transfer import TransferFunction
 from .context import create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
-from .util import Clock, check_size, set_uniforms, table_texture
+from .util import Clock, GLOwner, check_size, set_uniforms, table_texture
 
 __all__ = ["Renderer", "FrameStats"]
 
@@ -63,7 +63,7 @@ class FrameStats:
                 + self.readback)
 
 
-class Renderer:
+class Renderer(GLOwner):
     """Renders tetrahedral meshes on the GPU; reuse one for many frames.
 
     Parameters
@@ -109,22 +109,11 @@ class Renderer:
         self.last_stats = FrameStats()
         self._released = False
 
-    # ---- lifetime ----
+    # ---- lifetime (GLOwner: release(), the context manager) ----
     def __enter__(self) -> "Renderer":
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.release()
-
-    def release(self) -> None:
-        """Release every GL object and the context. Safe to call twice."""
-        if self._released:
-            return
-        # Creating another context (a Raycaster, a second Renderer) makes it current:
-        # enter ours so that the releases below reach it.
-        self.ctx.__enter__()
-        for obj in self._gl_objects():
-            obj.release()
+    def _forget(self) -> None:
         self._programs.clear()
         self._vaos.clear()
         self._mesh_buffers = []
@@ -132,8 +121,6 @@ class Renderer:
         self._fans = self._order = self._table_tex = self._fan_indices = None
         self._mesh = None
         self._table = self._table_cache = None
-        self.ctx.release()
-        self._released = True
 
     def _gl_objects(self) -> list[Any]:
         objs = [*self._vaos.values(), *self._programs.values(), *self._mesh_buffers]
@@ -351,8 +338,7 @@ class Renderer:
         return image
 
     def _check(self, size: tuple[int, int]) -> tuple[int, int]:
-        if self._released:
-            raise RuntimeError("this Renderer has been released")
+        self._check_alive()
         self._clock = Clock(self.ctx, self.profile)
         return check_size(size, self.ctx)
 
@@ -372,8 +358,7 @@ class Renderer:
         -------
         (height, width, 4) float32 premultiplied RGBA, row 0 at the top.
         """
-        if self._released:
-            raise RuntimeError("this Renderer has been released")
+        self._check_alive()
         with self.ctx:  # ours may not be current: another context may have been made since
             return self._render(mesh, camera, tf, size, order, shader)
 
@@ -440,8 +425,7 @@ class Renderer:
         clipping range; ``+inf`` / ``-inf`` where no tet covers the pixel. These are the ray
         limits for fusing the mesh with a ray-cast volume (:mod:`tetvr.fuse`).
         """
-        if self._released:
-            raise RuntimeError("this Renderer has been released")
+        self._check_alive()
         with self.ctx:
             return self._depth_extent(mesh, camera, size)
 

@@ -1,4 +1,4 @@
-"""Small GL helpers shared by the renderers: size checks, uniforms, the table texture, stage clocks."""
+"""Small GL helpers shared by the renderers: GL ownership, size checks, uniforms, the table texture, stage clocks."""
 
 from __future__ import annotations
 
@@ -12,7 +12,54 @@ from ..image import image_size
 if TYPE_CHECKING:
     from ..preintegrate import PreintegrationTable
 
-__all__ = ["check_size", "set_uniforms", "table_texture", "Clock"]
+__all__ = ["GLOwner", "check_size", "set_uniforms", "table_texture", "Clock"]
+
+
+class GLOwner:
+    """The lifetime of a renderer: a moderngl context, made (and released) or borrowed,
+    and every GL object made in it, released together by :meth:`release` or on leaving a
+    ``with`` block. Subclasses list their objects in :meth:`_gl_objects` and drop their
+    references in :meth:`_forget`; nothing relies on ``__del__``.
+    """
+
+    ctx: Any
+    _owns_ctx: bool = True
+    _released: bool = False
+
+    def __enter__(self) -> Any:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+    def release(self) -> None:
+        """Release every GL object (and the context, if this object made it). Safe twice."""
+        if self._released:
+            return
+        # Creating another context (a Raycaster, a second Renderer) makes it current:
+        # enter ours so that the releases below reach it, and unbind any framebuffer of
+        # ours first (a released framebuffer left bound is a dead name the next
+        # framebuffer's creation trips over).
+        with self.ctx:
+            self.ctx.detect_framebuffer(0).use()
+            for obj in self._gl_objects():
+                obj.release()
+        self._forget()
+        if self._owns_ctx:
+            self.ctx.release()
+        self._released = True
+
+    def _check_alive(self) -> None:
+        if self._released:
+            raise RuntimeError(f"this {type(self).__name__} has been released")
+
+    def _gl_objects(self) -> list[Any]:
+        """Every GL object this owner made and still holds."""
+        raise NotImplementedError
+
+    def _forget(self) -> None:
+        """Drop the references to released GL objects and cached GPU state."""
+        raise NotImplementedError
 
 
 def check_size(size: tuple[int, int], ctx: Any) -> tuple[int, int]:
