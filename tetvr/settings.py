@@ -39,7 +39,7 @@ class RenderSettings:
         interlocking parts; see :mod:`tetvr.boundary`) or ``"none"`` (input order; only
         for measurements).
     table_scalar_bins : N, samples of the scalar axis of the pre-integration table, or
-        ``"auto"`` (default): 256, 257, 512 or 513, whichever the scene needs (:mod:`tetvr.tablesize`
+        ``"auto"`` (default): 256 or 512, whichever the scene needs (:mod:`tetvr.tablesize`
         estimates each size's error from the transfer function and the mesh's cells).
     table_thickness_slices : K, thickness slices on the logarithmic axis, or ``"auto"``
         (default): 8, 15, 22, 29 or 43 slices over the span of 16 slices at

@@ -39,16 +39,14 @@ tolerance:
    steps evenly, so all are slices of that one fine table.
 4. The estimate is the weighted RMS over the segments, both axes combined in quadrature.
    The cheapest table (N*N*(K+1) entries, which sets build time and memory) whose estimate
-   is within ``tolerance`` wins, and among those within 2 % of its cost the one with the
-   smallest estimate (257 bins against 256: see :data:`AUTO_BINS`); if none is within the
-   tolerance, the most accurate (ties within 10 % go to the cheaper). Tables above
-   :data:`MAX_AUTO_ENTRIES` are not considered.
+   is within ``tolerance`` wins; if none is, the most accurate (ties within 10 % go to the
+   cheaper). Tables above :data:`MAX_AUTO_ENTRIES` are not considered.
 
 The estimates run at 1-10x the RMSE the image then has against the reference: the image
 composites several segments and covers background too. The default tolerance 5e-5 (an
 8-bit step is 3.9e-3) keeps the image 85-105 dB from the reference on the benchmark
-scenes; the decision costs 0.02-0.08 s per transfer function, a tenth to a quarter of
-a 256-bin table's build. The thickness axis keeps the span of a 16-slice table at the settings'
+scenes; the decision costs ~0.02 s per transfer function, a tenth of a 256-bin
+table's build. The thickness axis keeps the span of a 16-slice table at the settings'
 ``table_log_base`` (``base ** 15``, 1150x at 1.6): K only sets how finely it is cut.
 """
 
@@ -72,11 +70,7 @@ __all__ = ["SegmentSample", "TableSize", "sample_segments", "scalar_axis_error",
 
 #: Candidate scalar bins of an "auto" table. Below 256 the build is already cheap
 #: (0.15 s) and the frame no faster; above 512 the build takes seconds and 150 MiB+.
-#: 257 and 513 put a node on every control point at a multiple of 1/256 of the table's
-#: range (presets and hand-made maps usually sit at 1/2, 1/4, 1/8 ...), where the table is
-#: then exact in the transfer function; for other control points 256 or 512 can fall
-#: closer. The estimate decides, at the same cost.
-AUTO_BINS = (256, 257, 512, 513)
+AUTO_BINS = (256, 512)
 #: Candidate thickness slices: K - 1 divides _FINE_STEPS, so each is a subset of one table.
 AUTO_SLICES = (8, 15, 22, 29, 43)
 #: RMS per-segment error the "auto" size aims for (premultiplied RGBA, 1 = full intensity).
@@ -95,8 +89,6 @@ _N_SEGMENTS = 4096
 MAX_AUTO_ENTRIES = 256 * 256 * 44
 #: Ties in the estimate (relative) go to the cheaper table when none meets the tolerance.
 _TIE = 0.1
-#: Ties in cost (relative; 257 against 256 bins is 1 %) go to the smaller estimate.
-_COST_TIE = 0.02
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -266,11 +258,10 @@ def choose_table_size(tf: TransferFunction, mesh: TetMesh, *, tolerance: float =
     affordable = [o for o in options if cost[o] <= MAX_AUTO_ENTRIES]
     options = affordable or [min(options, key=lambda o: cost[o])]
     good = [o for o in options if o.error <= tolerance]
-    if not good:
-        best = min(o.error for o in options)
-        good = [o for o in options if o.error <= best * (1 + _TIE)]
-    cheapest = min(cost[o] for o in good)
-    return min((o for o in good if cost[o] <= cheapest * (1 + _COST_TIE)), key=lambda o: (o.error, cost[o]))
+    if good:
+        return min(good, key=lambda o: (cost[o], o.error))
+    best = min(o.error for o in options)
+    return min((o for o in options if o.error <= best * (1 + _TIE)), key=lambda o: (cost[o], o.error))
 
 
 def segment_sample(mesh: TetMesh) -> SegmentSample:
