@@ -51,8 +51,10 @@ class RenderSettings:
         it beats base 2 (a 33000x span) by up to 8 dB where colour changes along thick
         opaque segments (``bench/speed_accuracy.py``).
     table_tolerance : the RMS per-segment error (premultiplied RGBA) an ``"auto"`` table
-        size aims for; the cheapest table estimated within it is used. The default 5e-5
-        keeps the benchmark scenes 85-105 dB from the reference (an 8-bit step is 3.9e-3).
+        size aims for; the cheapest table estimated within it is used (if none is, the
+        most accurate auto size). The default 5e-5 (an 8-bit step is 3.9e-3) is met on
+        the synthetic benchmark scenes (97-104 dB from the reference), not on two CFD
+        meshes with spiky transfer functions (512 bins: 68 and 87 dB).
     table_dtype : ``"float32"`` or ``"uint8"`` storage of the table.
     table_encoding : ``"normalized"`` stores colour/alpha and optical depth per unit
         length, so that alpha is exact in the thickness and only the (slowly varying)

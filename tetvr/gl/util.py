@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import abc
 import time
 from typing import TYPE_CHECKING, Any
 
@@ -15,7 +16,7 @@ if TYPE_CHECKING:
 __all__ = ["GLOwner", "check_size", "set_uniforms", "table_texture", "Clock"]
 
 
-class GLOwner:
+class GLOwner(abc.ABC):
     """The lifetime of a renderer: a moderngl context, made (and released) or borrowed,
     and every GL object made in it, released together by :meth:`release` or on leaving a
     ``with`` block. Subclasses list their objects in :meth:`_gl_objects` and drop their
@@ -53,13 +54,13 @@ class GLOwner:
         if self._released:
             raise RuntimeError(f"this {type(self).__name__} has been released")
 
+    @abc.abstractmethod
     def _gl_objects(self) -> list[Any]:
         """Every GL object this owner made and still holds."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def _forget(self) -> None:
         """Drop the references to released GL objects and cached GPU state."""
-        raise NotImplementedError
 
 
 def check_size(size: tuple[int, int], ctx: Any) -> tuple[int, int]:
