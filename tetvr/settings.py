@@ -42,14 +42,15 @@ class RenderSettings:
         ``"auto"`` (default): 256 or 512, whichever the scene needs (:mod:`tetvr.tablesize`
         estimates each size's error from the transfer function and the mesh's cells).
     table_thickness_slices : K, thickness slices on the logarithmic axis, or ``"auto"``
-        (default): 8, 15, 22, 29 or 43 slices over the span of 16 slices at
-        ``table_log_base``, the fewest the scene needs (most scenes: 8; thick, strongly
-        absorbing segments across colour changes: more).
-    table_log_base : ratio between consecutive thickness slices when K is given; with
-        ``"auto"`` slices, the thickness axis spans ``table_log_base ** 15``. The default
-        1.6 spans thicknesses from d_max / 1150 to d_max; measured against the reference
-        it beats base 2 (a 33000x span) by up to 8 dB where colour changes along thick
-        opaque segments (``bench/speed_accuracy.py``).
+        (default): 8, 15, 22, 29 or 43 slices, the fewest the scene needs (most scenes: 8;
+        thick, strongly absorbing segments across colour changes: more), spanning
+        thicknesses from d_max / span to d_max with the span the optical depth of the
+        thickest segment at the largest extinction, at least 8
+        (:func:`tetvr.tablesize.auto_span`).
+    table_log_base : ratio between consecutive thickness slices when K is given (not used
+        by ``"auto"`` slices). 1.6 spans d_max / 1150 to d_max with 16 slices; measured
+        against the reference it beats base 2 (a 33000x span) by up to 8 dB where colour
+        changes along thick opaque segments (``bench/speed_accuracy.py``).
     table_tolerance : the RMS per-segment error (premultiplied RGBA) an ``"auto"`` table
         size aims for; the cheapest table estimated within it is used (if none is, the
         most accurate auto size). The default 5e-5 (an 8-bit step is 3.9e-3) is met on

@@ -48,8 +48,10 @@ composites several segments and covers background too. The default tolerance 5e-
 from the reference; the two CFD meshes' spiky transfer functions are not met within
 :data:`MAX_AUTO_ENTRIES` and get its most accurate table, 512 bins (68 and 87 dB, from 68
 and 72 dB at 256). The decision costs ~0.02 s per transfer function, a tenth of a 256-bin
-table's build. The thickness axis keeps the span of a 16-slice table at the settings'
-``table_log_base`` (``base ** 15``, 1150x at 1.6): K only sets how finely it is cut.
+table's build. The thickness axis of an "auto" table spans d_max / span .. d_max with the
+span the optical depth of the thickest segment at the largest extinction, at least 8
+(:func:`auto_span`: below optical depth 1 the linear ramp to zero thickness is accurate);
+K only sets how finely that span is cut.
 """
 
 from __future__ import annotations
@@ -68,7 +70,7 @@ from .preintegrate import PreintegrationTable, build_table, table_scalar_range
 from .transfer import TransferFunction
 
 __all__ = ["SegmentSample", "TableSize", "sample_segments", "scalar_axis_error", "thickness_axis_error",
-           "choose_table_size", "AUTO_BINS", "AUTO_SLICES", "DEFAULT_TOLERANCE", "MAX_AUTO_ENTRIES"]
+           "choose_table_size", "auto_span", "AUTO_BINS", "AUTO_SLICES", "DEFAULT_TOLERANCE", "MAX_AUTO_ENTRIES"]
 
 #: Candidate scalar bins of an "auto" table. Below 256 the build is already cheap
 #: (0.15 s) and the frame no faster; above 512 the build takes seconds and 150 MiB+.
@@ -80,8 +82,14 @@ DEFAULT_TOLERANCE = 5e-5
 #: Log-thickness steps of the fine comparison table, and its scalar bins.
 _FINE_STEPS = 84
 _FINE_BINS = 16
-#: The span of the thickness axis, in steps of the settings' log base (that of K = 16).
+#: The span of the thickness axis, in steps of the settings' log base (that of K = 16),
+#: where the table's slices are named (and for the estimate tests).
 SPAN_STEPS = 15
+#: An "auto" thickness axis spans d_max / span .. d_max with span = the largest optical
+#: depth a segment of length d_max can have (extinction max * d_max), within these bounds:
+#: below d_min = d_max / span no segment is thicker than optical depth 1, where the table's
+#: linear ramp to zero thickness is accurate, so slices further down are wasted.
+SPAN_BOUNDS = (8.0, 1e6)
 #: Segments sampled per mesh.
 _N_SEGMENTS = 4096
 #: The largest "auto" table, N * N * (K + 1) entries: 256 x 256 x 44 or 512 x 512 x 9,
@@ -231,7 +239,7 @@ def choose_table_size(tf: TransferFunction, mesh: TetMesh, *, tolerance: float =
 
     ``n_bins`` / ``n_slices`` given as integers are kept (only the other axis is chosen);
     an explicit ``n_slices`` keeps ``log_base`` too. With ``n_slices="auto"`` the slices
-    spread over ``log_base ** 15`` (the span of 16 slices at that base).
+    spread over :func:`auto_span` (``log_base`` is not used).
 
     Examples
     --------
@@ -247,7 +255,7 @@ def choose_table_size(tf: TransferFunction, mesh: TetMesh, *, tolerance: float =
         raise ValueError(f"tolerance must be a positive number, got {tolerance!r}")
     sample = sample if sample is not None else segment_sample(mesh)
     rng = table_scalar_range(mesh.scalar_range, tf)
-    span = float(log_base) ** SPAN_STEPS
+    span = auto_span(tf, rng, mesh.max_edge, optics) if n_slices == "auto" else float(log_base) ** SPAN_STEPS
     bins = AUTO_BINS if n_bins == "auto" else (int(n_bins),)
     e_bins = {n: scalar_axis_error(tf, rng, n, sample, optics=optics) for n in bins}
     if n_slices == "auto":
@@ -265,6 +273,23 @@ def choose_table_size(tf: TransferFunction, mesh: TetMesh, *, tolerance: float =
         return min(good, key=lambda o: (cost[o], o.error))
     best = min(o.error for o in options)
     return min((o for o in options if o.error <= best * (1 + _TIE)), key=lambda o: (cost[o], o.error))
+
+
+def auto_span(tf: TransferFunction, scalar_range: tuple[float, float], d_max: float, optics: str = "exact") -> float:
+    """The ratio d_max / d_min of an "auto" thickness axis: the optical depth of the
+    thickest segment at the transfer function's largest extinction, within SPAN_BOUNDS.
+
+    Measured on the benchmark scenes and stability cases (K = 8, 22, 43 slices, 256 bins),
+    narrowing the span from the former fixed 1150x to this gains up to 20 dB where thick
+    segments change colour (opaque rings: 74.9 -> 95.1 dB at K = 8; cells graded over six
+    orders of magnitude: 64.0 -> 86.2 dB; a face seen edge-on: 81.7 -> 105.2 dB) and loses
+    nowhere more than 0.2 dB; a 1e-3-thin opaque slab (optical depth 80) keeps its span.
+    """
+    lo, hi = scalar_range
+    s = np.union1d(np.linspace(lo, hi, 1025), np.clip(tf.breakpoints, lo, hi))
+    _, tau = _extinction(tf, s, optics)
+    depth = float(tau.max()) * float(d_max)
+    return float(min(max(depth, SPAN_BOUNDS[0]), SPAN_BOUNDS[1])) if math.isfinite(depth) else SPAN_BOUNDS[1]
 
 
 def segment_sample(mesh: TetMesh) -> SegmentSample:
