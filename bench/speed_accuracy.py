@@ -169,7 +169,7 @@ def table_times(vs, mesh, tf) -> dict[str, float]:
     uncached: the median of 3 runs per distinct setting. (The mesh's segment sample is
     paid once per mesh, not per transfer function, and is not counted.)"""
     from tetvr.preintegrate import build_table, table_for
-    from tetvr.tablesize import _fine_table, segment_sample
+    from tetvr.tablesize import cache_clear, segment_sample
 
     segment_sample(mesh)
     seen: dict[tuple, float] = {}
@@ -180,7 +180,7 @@ def table_times(vs, mesh, tf) -> dict[str, float]:
         if sig not in seen:
             runs = []
             for _ in range(3):
-                _fine_table.cache_clear()
+                cache_clear()
                 c0 = time.process_time()
                 size = resolve_table_size(st, tf, mesh)
                 params = dict(n_bins=size.n_bins, n_slices=size.n_slices, log_base=size.log_base,

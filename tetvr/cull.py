@@ -222,7 +222,8 @@ def submesh(mesh: TetMesh, ids: NDArray[np.integer[Any]]) -> TetMesh:
     Points and scalars stay as they are (so the scalar range and the near-plane test do),
     and so do :attr:`TetMesh.max_edge`, which sets the thickness axis of the
     pre-integration table, and the segment sample that sizes an "auto" table: the GPU
-    renderer then builds the same table as for the whole mesh. The cells keep their canonical (ascending) order.
+    renderer then builds the same table as for the whole mesh. The cells keep their
+    canonical (ascending) order.
     """
     idx = np.unique(np.asarray(ids, dtype=np.int64))
     if idx.size and (idx[0] < 0 or idx[-1] >= mesh.n_tets):

@@ -65,12 +65,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .mesh import TetMesh
-from .optics import MAX_OPACITY
+from .optics import extinction
 from .preintegrate import PreintegrationTable, build_table, table_scalar_range
 from .transfer import TransferFunction
 
 __all__ = ["SegmentSample", "TableSize", "sample_segments", "scalar_axis_error", "thickness_axis_error",
-           "choose_table_size", "auto_span", "AUTO_BINS", "AUTO_SLICES", "DEFAULT_TOLERANCE", "MAX_AUTO_ENTRIES"]
+           "choose_table_size", "auto_span", "cache_clear", "AUTO_BINS", "AUTO_SLICES", "DEFAULT_TOLERANCE", "MAX_AUTO_ENTRIES"]
 
 #: Candidate scalar bins of an "auto" table. Below 256 the build is already cheap
 #: (0.15 s) and the frame no faster; above 512 the build takes seconds and 150 MiB+.
@@ -181,7 +181,7 @@ def sample_segments(mesh: TetMesh, n: int = _N_SEGMENTS) -> SegmentSample:
 def _extinction(tf: TransferFunction, s: NDArray[np.float64], optics: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     color, opacity = tf.evaluate(s)
     if optics == "exact":
-        return color, -np.log1p(-np.clip(opacity, 0.0, MAX_OPACITY)) / tf.unit_distance
+        return color, extinction(opacity, tf.unit_distance)
     return color, np.clip(opacity, 0.0, 1.0) / tf.unit_distance  # tau = a / u (VTK's conventions)
 
 
@@ -254,16 +254,26 @@ def choose_table_size(tf: TransferFunction, mesh: TetMesh, *, tolerance: float =
             or tolerance <= 0):
         raise ValueError(f"tolerance must be a positive number, got {tolerance!r}")
     sample = sample if sample is not None else segment_sample(mesh)
-    rng = table_scalar_range(mesh.scalar_range, tf)
-    span = auto_span(tf, rng, mesh.max_edge, optics) if n_slices == "auto" else float(log_base) ** SPAN_STEPS
+    return _choose(tf, sample, mesh.scalar_range, mesh.max_edge, float(tolerance), n_bins, n_slices,
+                   float(log_base), encoding, optics)
+
+
+# Every Renderer (and every tetvr.render call) asks again for the same scene; the sample
+# object stands for the mesh in the key (it is made once per mesh and compared by identity).
+@functools.lru_cache(maxsize=32)
+def _choose(tf: TransferFunction, sample: SegmentSample, data_range: tuple[float, float], d_max: float,
+            tolerance: float, n_bins: int | str, n_slices: int | str, log_base: float, encoding: str,
+            optics: str) -> TableSize:
+    rng = table_scalar_range(data_range, tf)
+    span = auto_span(tf, rng, d_max, optics) if n_slices == "auto" else log_base ** SPAN_STEPS
     bins = AUTO_BINS if n_bins == "auto" else (int(n_bins),)
     e_bins = {n: scalar_axis_error(tf, rng, n, sample, optics=optics) for n in bins}
     if n_slices == "auto":
-        e_slices = thickness_axis_error(tf, rng, mesh.max_edge, sample, span=span, encoding=encoding, optics=optics)
+        e_slices = thickness_axis_error(tf, rng, d_max, sample, span=span, encoding=encoding, optics=optics)
         bases = {k: span ** (1.0 / (k - 1)) for k in e_slices}
     else:
         e_slices = {int(n_slices): 0.0}  # not estimated: not ours to choose
-        bases = {int(n_slices): float(log_base)}
+        bases = {int(n_slices): log_base}
     options = [TableSize(n, k, bases[k], e_bins[n], e_slices[k]) for n in e_bins for k in e_slices]
     cost = {o: o.n_bins * o.n_bins * (o.n_slices + 1) for o in options}
     affordable = [o for o in options if cost[o] <= MAX_AUTO_ENTRIES]
@@ -302,8 +312,13 @@ def segment_sample(mesh: TetMesh) -> SegmentSample:
 
 
 def _rms(e: NDArray[np.float64], w: NDArray[np.float64]) -> float:
-    # Summed in a fixed order (sorted), so the result does not depend on the sample's order.
-    return float(math.sqrt(np.sort(w * e * e).sum()))
+    return math.sqrt(float(np.dot(w, e * e)))
+
+
+def cache_clear() -> None:
+    """Forget the cached size decisions and comparison tables (for timing them)."""
+    _choose.cache_clear()
+    _fine_table.cache_clear()
 
 
 def resolve(settings: Any, tf: TransferFunction, mesh: TetMesh) -> TableSize:

@@ -137,9 +137,6 @@ class Raycaster(GLOwner):
         self._released = False
 
     # ---- lifetime (GLOwner: release(), the context manager) ----
-    def __enter__(self) -> "Raycaster":
-        return self
-
     def _forget(self) -> None:
         self._programs.clear()
         self._vaos.clear()

@@ -110,9 +110,6 @@ class Renderer(GLOwner):
         self._released = False
 
     # ---- lifetime (GLOwner: release(), the context manager) ----
-    def __enter__(self) -> "Renderer":
-        return self
-
     def _forget(self) -> None:
         self._programs.clear()
         self._vaos.clear()

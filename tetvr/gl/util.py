@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import abc
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
@@ -14,6 +14,9 @@ if TYPE_CHECKING:
     from ..preintegrate import PreintegrationTable
 
 __all__ = ["GLOwner", "check_size", "set_uniforms", "table_texture", "Clock"]
+
+
+_Owner = TypeVar("_Owner", bound="GLOwner")
 
 
 class GLOwner(abc.ABC):
@@ -27,7 +30,7 @@ class GLOwner(abc.ABC):
     _owns_ctx: bool = True
     _released: bool = False
 
-    def __enter__(self) -> Any:
+    def __enter__(self: _Owner) -> _Owner:
         return self
 
     def __exit__(self, *exc: object) -> None:
