@@ -133,7 +133,7 @@ def test_read_paraview_errors(tmp_path):
 
 
 def test_matplotlib_colormaps():
-    pytest.importorskip("matplotlib")
+    pytest.importorskip("matplotlib", reason="matplotlib colour maps need matplotlib (pip install tetvr[notebooks] or tetvr[bench])")
     tf = from_matplotlib("viridis", (2.0, 4.0), opacity=0.3, unit_distance=0.5)
     assert len(tf.color) == 256 and tf.domain == (2.0, 4.0) and tf.unit_distance == 0.5
     # The nodes are matplotlib's own entries: its lookup table, at positions k / 255.
@@ -151,7 +151,7 @@ def test_matplotlib_colormaps():
 
 
 def test_colormap_reports_the_real_error_of_a_known_matplotlib_map():
-    pytest.importorskip("matplotlib")
+    pytest.importorskip("matplotlib", reason="matplotlib colour maps need matplotlib (pip install tetvr[notebooks] or tetvr[bench])")
     with pytest.raises(ValueError, match="scalar_range") as err:
         colormap("magma", (1, 0))
     assert "unknown colour map" not in str(err.value)
