@@ -37,6 +37,7 @@ from _common import REAL_MESHES, TETS_DATA, load_quiet, machine, timed_repeats  
 
 import tetvr  # noqa: E402
 from tetvr import Camera, RenderSettings, TransferFunction, synthetic  # noqa: E402
+from tetvr.preintegrate import aligned_scalar_range, table_scalar_range  # noqa: E402
 from tetvr.reference import render_reference  # noqa: E402
 from tetvr.settings import SORT_METHODS  # noqa: E402
 from tetvr.sort import SORTERS, auto_method  # noqa: E402
@@ -64,8 +65,9 @@ def variants() -> dict[str, RenderSettings]:
     v["cubic thickness filter"] = dataclasses.replace(DEFAULT, table_filter="cubic")
     v["premultiplied table, cubic"] = dataclasses.replace(DEFAULT, table_encoding="premultiplied", table_filter="cubic")
     v["uint8 framebuffer"] = dataclasses.replace(DEFAULT, framebuffer="uint8")
+    v["uniform table nodes"] = dataclasses.replace(DEFAULT, table_align_nodes=False)
     v["fixed table N=256, K=16 (the 0.x default)"] = dataclasses.replace(
-        DEFAULT, table_scalar_bins=256, table_thickness_slices=16, table_log_base=1.6)
+        DEFAULT, table_scalar_bins=256, table_thickness_slices=16, table_log_base=1.6, table_align_nodes=False)
     # One axis fixed, the other left to the "auto" size.
     for n in (64, 128, 512):
         v[f"N={n}"] = dataclasses.replace(DEFAULT, table_scalar_bins=n)
@@ -147,9 +149,12 @@ def time_variants(renderers, mesh, camera, tf, size, repeats):
 def resolved(s: RenderSettings, mesh, tf) -> RenderSettings:
     """The settings with ``sort="auto"`` and an "auto" table size made concrete for this scene."""
     size = resolve_table_size(s, tf, mesh)
+    # Aligned nodes that land where uniform ones do are the same table.
+    rng = table_scalar_range(mesh.scalar_range, tf)
+    align = s.table_align_nodes and aligned_scalar_range(rng, tf, size.n_bins) != rng
     return dataclasses.replace(s, sort=auto_method(mesh) if s.sort == "auto" else s.sort,
                                table_scalar_bins=size.n_bins, table_thickness_slices=size.n_slices,
-                               table_log_base=round(size.log_base, 9), table_tolerance=1.0)
+                               table_log_base=round(size.log_base, 9), table_tolerance=1.0, table_align_nodes=align)
 
 
 def same_as_default(vs: dict[str, RenderSettings], mesh, tf) -> dict[str, str]:
@@ -176,7 +181,7 @@ def table_times(vs, mesh, tf) -> dict[str, float]:
     out = {}
     for key, st in vs.items():
         sig = (st.table_scalar_bins, st.table_thickness_slices, st.table_log_base, st.table_tolerance,
-               st.table_encoding, st.table_dtype, st.optics)
+               st.table_encoding, st.table_dtype, st.optics, st.table_align_nodes)
         if sig not in seen:
             runs = []
             for _ in range(3):
@@ -186,7 +191,8 @@ def table_times(vs, mesh, tf) -> dict[str, float]:
                 params = dict(n_bins=size.n_bins, n_slices=size.n_slices, log_base=size.log_base,
                               encoding=st.table_encoding, dtype=st.table_dtype, optics=st.optics)
                 c1 = time.process_time()
-                t = table_for(tf, mesh.scalar_range, mesh.max_edge, **params)  # the renderer's exact inputs
+                # the renderer's exact inputs (its scalar range includes the node alignment)
+                t = table_for(tf, mesh.scalar_range, mesh.max_edge, align_nodes=st.table_align_nodes, **params)
                 c2 = time.process_time()
                 build_table(tf, t.scalar_range, t.d_max, **params)
                 runs.append(c1 - c0 + time.process_time() - c2)

@@ -111,7 +111,8 @@ def test_table_follows_the_transfer_function_asked_for():
         table_a = r.table(mesh, tf_a)
         want = table_for(tf_b, mesh.scalar_range, mesh.max_edge, n_bins=s.table_scalar_bins,
                          n_slices=s.table_thickness_slices, log_base=s.table_log_base,
-                         encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics)
+                         encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics,
+                         align_nodes=s.table_align_nodes)
         for _ in range(2):
             table_b = r.table(mesh, tf_b)
             assert np.array_equal(table_b.data, want.data)

@@ -51,7 +51,7 @@ from numpy.typing import NDArray
 from .optics import MAX_OPACITY, OPTICS, mean_neg_log
 from .transfer import TransferFunction
 
-__all__ = ["PreintegrationTable", "build_table", "table_for", "table_scalar_range"]
+__all__ = ["PreintegrationTable", "build_table", "table_for", "table_scalar_range", "aligned_scalar_range"]
 
 # Largest extinction (per world unit) stored in a "normalized" table. A tiny unit distance
 # gives extinctions past float32's range: stored as inf, the shader's d * inf at d = 0 is
@@ -85,6 +85,11 @@ class PreintegrationTable:
     @property
     def n_bins(self) -> int:
         return int(self.data.shape[1])
+
+    @property
+    def node_spacing(self) -> float:
+        """Scalar distance between adjacent nodes of the scalar axes."""
+        return (self.scalar_range[1] - self.scalar_range[0]) / (self.n_bins - 1)
 
     @property
     def n_slices(self) -> int:
@@ -172,6 +177,64 @@ def table_scalar_range(data_range: tuple[float, float], tf: TransferFunction) ->
     return lo, hi
 
 
+#: Aligned nodes (:func:`aligned_scalar_range`) may widen the node spacing by at most
+#: 1 / ALIGN_MIN_FRACTION (11 %): the interpolation error of a smooth stretch grows with the
+#: square of the spacing, while a control point between nodes errs with its first power.
+ALIGN_MIN_FRACTION = 0.9
+#: ... and only where every ramp between adjacent control points spans at least this many
+#: node spacings: a node inside a ramp narrower than that spreads it over two bins
+#: (measured: a step transfer function 12 dB worse with a node on the step).
+ALIGN_MIN_RAMP_BINS = 2.0
+#: A control point within this fraction of a spacing from a node counts as on it.
+_ALIGN_EPS = 1e-3
+
+
+def aligned_scalar_range(scalar_range: tuple[float, float], tf: TransferFunction, n_bins: int) -> tuple[float, float]:
+    """The scalars of the first and last of ``n_bins`` nodes placed so that the transfer
+    function's control points fall on nodes.
+
+    Between two nodes a table takes the transfer function as linear; a control point
+    between them is cut off, an error of the order of one spacing times the jump in slope
+    (the largest scalar-axis error of smooth colour maps, whose points sit at k/8 or
+    k/16 of the range, while uniform nodes sit at k/(N-1)). Here the first node stays at
+    ``scalar_range[0]`` and the spacing is ``(hi - lo) / m`` with m in
+    ``ALIGN_MIN_FRACTION * (N-1) .. N-1`` chosen to put the most control points on nodes
+    (ties to the finer spacing); the last N-1-m nodes lie beyond ``hi``, where the transfer
+    function is clamped anyway. Uniform spacing (``scalar_range`` itself) is kept when no
+    m puts more points on nodes, or when some ramp between adjacent control points spans
+    fewer than ``ALIGN_MIN_RAMP_BINS`` spacings (steps and spikes: better centred
+    between nodes).
+
+    Measured against the exact reference (``bench/speed_accuracy.py``, viridis at k/8,
+    256 bins): camera inside a cube 97.6 -> 110.2 dB, opaque interlocking rings
+    102 -> 106 dB, a thick translucent block 110 -> 119 dB; nowhere worse by more than 0.1 dB.
+
+    >>> tf = TransferFunction.preset("viridis", (0.0, 1.0), opacity=0.5)
+    >>> lo, hi = aligned_scalar_range((0.0, 1.0), tf, 256)
+    >>> lo, round(hi * 248, 9)  # 248 spacings per unit: k/8 is node 31 k
+    (0.0, 255.0)
+    """
+    lo, hi = (float(v) for v in scalar_range)
+    n = int(n_bins)
+    if n < 3 or not hi > lo:
+        return lo, hi
+    u = (np.unique(np.clip(np.asarray(tf.breakpoints, dtype=np.float64), lo, hi)) - lo) / (hi - lo)
+    narrowest = float(np.diff(u).min()) if u.size > 1 else 1.0
+
+    def on_nodes(m: int) -> int:
+        x = u * m
+        return int(np.count_nonzero(np.abs(x - np.round(x)) <= _ALIGN_EPS))
+
+    best_m, best = n - 1, on_nodes(n - 1)
+    for m in range(n - 2, math.ceil(ALIGN_MIN_FRACTION * (n - 1)) - 1, -1):
+        count = on_nodes(m)
+        if count > best:
+            best_m, best = m, count
+    if best_m == n - 1 or narrowest * best_m < ALIGN_MIN_RAMP_BINS:
+        return lo, hi
+    return lo, lo + (n - 1) * (hi - lo) / best_m
+
+
 def table_for(
     tf: TransferFunction,
     data_range: tuple[float, float],
@@ -183,15 +246,20 @@ def table_for(
     encoding: str = "normalized",
     dtype: str = "float32",
     optics: str = "exact",
+    align_nodes: bool = False,
 ) -> PreintegrationTable:
     """The table for a transfer function and a mesh, from a cache keyed by all inputs.
 
     The scalar axis spans :func:`table_scalar_range`: the union of the data range and
-    the transfer function's domain.
+    the transfer function's domain; with ``align_nodes`` its nodes are placed on the
+    transfer function's control points where that helps (:func:`aligned_scalar_range`).
     """
     # Thicknesses are rounded up to 7 significant digits so near-equal meshes share a table.
     d_top = float(f"{d_max * (1 + 1e-6):.7g}")
-    return _cached(tf, table_scalar_range(data_range, tf), d_top, n_bins=n_bins, n_slices=n_slices,
+    rng = table_scalar_range(data_range, tf)
+    if align_nodes:
+        rng = aligned_scalar_range(rng, tf, n_bins)
+    return _cached(tf, rng, d_top, n_bins=n_bins, n_slices=n_slices,
                    log_base=float(log_base), encoding=encoding, dtype=dtype, optics=optics)
 
 

@@ -56,6 +56,11 @@ class RenderSettings:
         most accurate auto size). The default 5e-5 (an 8-bit step is 3.9e-3) is met on
         the synthetic benchmark scenes (97-104 dB from the reference), not on two CFD
         meshes with spiky transfer functions (512 bins: 68 and 87 dB).
+    table_align_nodes : place the table's scalar nodes so that the transfer function's
+        control points fall on nodes (:func:`tetvr.preintegrate.aligned_scalar_range`;
+        default ``True``), rather than spaced evenly over the range (``False``, the
+        former behaviour): a control point between nodes is cut off by the table's
+        linear ramp between them. Kept off where a ramp is narrower than two spacings.
     table_dtype : ``"float32"`` or ``"uint8"`` storage of the table.
     table_encoding : ``"normalized"`` stores colour/alpha and optical depth per unit
         length, so that alpha is exact in the thickness and only the (slowly varying)
@@ -89,6 +94,7 @@ class RenderSettings:
     table_thickness_slices: int | Literal["auto"] = "auto"
     table_log_base: float = 1.6
     table_tolerance: float = 5e-5
+    table_align_nodes: bool = True
     table_dtype: Literal["float32", "uint8"] = "float32"
     table_encoding: Literal["normalized", "premultiplied"] = "normalized"
     table_filter: Literal["linear", "cubic"] = "linear"
@@ -124,6 +130,9 @@ class RenderSettings:
         object.__setattr__(self, "table_tolerance", float(tol))
         if not isinstance(self.cull, (bool, np.bool_)):
             raise ValueError(f"cull must be True or False, got {self.cull!r}")
+        if not isinstance(self.table_align_nodes, (bool, np.bool_)):
+            raise ValueError(f"table_align_nodes must be True or False, got {self.table_align_nodes!r}")
+        object.__setattr__(self, "table_align_nodes", bool(self.table_align_nodes))
         if not isinstance(self.perspective_correct, (bool, np.bool_)):
             raise ValueError(f"perspective_correct must be True or False, got {self.perspective_correct!r}")
         if isinstance(self.table_log_base, (str, bytes)):

@@ -259,7 +259,8 @@ class Renderer(GLOwner):
             return self._table_cache[1]
         size = resolve_table_size(s, tf, mesh)
         table = table_for(tf, mesh.scalar_range, mesh.max_edge, n_bins=size.n_bins, n_slices=size.n_slices,
-                          log_base=size.log_base, encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics)
+                          log_base=size.log_base, encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics,
+                          align_nodes=s.table_align_nodes)
         self._table_cache = (key, table)
         return table
 
@@ -376,7 +377,7 @@ class Renderer(GLOwner):
             if self.settings.cull:
                 # Sort everything, then filter: MPVONC constraints through culled cells hold.
                 keep, _ = visible_cells(mesh, camera, tf, size=size,
-                                        scalar_margin=gpu_scalar_margin(mesh, tf, n_bins=table.n_bins))
+                                        scalar_margin=gpu_scalar_margin(mesh, tf, node_spacing=table.node_spacing))
                 mask = np.zeros(mesh.n_tets, dtype=bool)
                 mask[keep] = True
                 order_ids = order_ids[mask[order_ids]]
