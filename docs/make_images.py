@@ -135,6 +135,8 @@ METHOD_PICTURES = {
     "framebuffer": (post_scene, RenderSettings(framebuffer="uint8"), "framebuffer='uint8': 8-bit compositing"),
     "table_scalar_bins": (lambda: stability("spike_tf"), RenderSettings(table_scalar_bins=64),
                           "table_scalar_bins=64 on a thin opacity spike (iso-layer)"),
+    "table_align_nodes": (lambda: stability("camera_inside"), RenderSettings(table_align_nodes=False),
+                          "table_align_nodes=False: even nodes miss the colour map's points at k/8"),
     "table_thickness_slices": (rings, RenderSettings(table_thickness_slices=8, table_log_base=4.0),
                                "table_thickness_slices=8, table_log_base=4 on opaque rings"),
     "sort_none": (rings, RenderSettings(sort="none"), "sort='none': cells drawn in input order"),

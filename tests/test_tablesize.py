@@ -197,6 +197,18 @@ def test_aligned_nodes_put_the_control_points_on_nodes():
         assert 1.0 < (rng[1] - rng[0]) / (uniform[1] - uniform[0]) <= 1 / ALIGN_MIN_FRACTION + 1e-12
 
 
+def test_aligned_nodes_favour_the_strongest_kinks():
+    """Eight weak colour points at k/7 (nodes every 1/252 would hold them all) against an
+    opacity peak with kinks at 0.3, 0.4, 0.5 (every 1/250): the peak's jumps in slope are
+    40 times larger, so it goes on nodes; at 512 bins (every 1/490) both do."""
+    color = [(k / 7, 0.4 + 0.02 * (k % 2), 0.5, 0.5) for k in range(8)]
+    tf = TransferFunction(color=color, opacity=[(0, 0.0), (0.3, 0.0), (0.4, 0.8), (0.5, 0.0), (1, 0.0)],
+                          unit_distance=1.0)
+    for n, points in ((256, [0.3, 0.4, 0.5]), (512, [0.3, 0.4, 0.5] + [k / 7 for k in range(8)])):
+        x = _node_offsets(aligned_scalar_range((0.0, 1.0), tf, n), n, points)
+        np.testing.assert_allclose(x, np.round(x), atol=1e-6)
+
+
 def test_aligned_nodes_keep_uniform_spacing_where_they_do_not_help():
     grey = TransferFunction.preset("grayscale", (0.0, 1.0), opacity=0.5)  # points at the ends only
     assert aligned_scalar_range((0.0, 1.0), grey, 256) == (0.0, 1.0)
