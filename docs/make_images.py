@@ -242,7 +242,7 @@ def tables():
         print(f"no {path}: run python bench/speed_accuracy.py first")
         return
     data = json.loads(path.read_text())
-    cols = ["default", "screen-linear interpolation", "premultiplied table", "uint8 framebuffer", "N=64",
+    cols = ["default", "uniform table nodes", "screen-linear interpolation", "premultiplied table", "uint8 framebuffer", "N=64",
             "sort=centroid", "sort=mpvonc", "sort=none"]
     print(f"<!-- from bench/results/speed_accuracy.json, {data['created']}, {data['size'][0]}x{data['size'][1]} px -->")
     print("| case | what | " + " | ".join(cols) + " |")

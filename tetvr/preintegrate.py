@@ -182,9 +182,13 @@ def table_scalar_range(data_range: tuple[float, float], tf: TransferFunction) ->
 #: square of the spacing, while a control point between nodes errs with its first power.
 ALIGN_MIN_FRACTION = 0.9
 #: ... and only where every ramp between adjacent control points (of the colour or of the
-#: opacity map) spans at least this many node spacings: a node inside a ramp narrower than
-#: that spreads it over two bins (measured: a step 12 dB worse with a node on the step).
-ALIGN_MIN_RAMP_BINS = 2.0
+#: opacity map) spans at least this many node spacings. Below that the image error depends
+#: on where the nodes fall in a way neither the bound below nor the table's error on the
+#: sampled segments predicts: the bluntfin mesh's opacity peak (ramps 7.7 spacings wide at
+#: 256 bins) rendered at 58-68 dB over spacings m = 234..255, the bound picking 59.7 dB
+#: against 67.8 dB for even nodes; at 512 bins (15 spacings) its pick was the best of the
+#: range (75.6 dB, even nodes 67.5 dB). A node on a step spreads it over two bins.
+ALIGN_MIN_RAMP_BINS = 10.0
 
 
 def _slope_jumps(x: NDArray[np.float64], y: NDArray[np.float64], at: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -212,13 +216,13 @@ def aligned_scalar_range(scalar_range: tuple[float, float], tf: TransferFunction
     over the control points (ties to the finer spacing); the last N-1-m nodes lie beyond
     ``hi``, where the transfer function is clamped anyway. Uniform spacing
     (``scalar_range`` itself) is kept when no m does better, or when a ramp between
-    adjacent control points spans fewer than ``ALIGN_MIN_RAMP_BINS`` spacings (steps and
-    spikes: two kinks within a bin, better centred between nodes).
+    adjacent control points spans fewer than ``ALIGN_MIN_RAMP_BINS`` spacings (steps,
+    spikes and other features a few bins wide, where the placement is a lottery).
 
     Measured against the exact reference (``bench/speed_accuracy.py``, auto table size):
     camera inside a cube 97.7 -> 110.2 dB (viridis at k/8, 256 bins); the bluntfin and
-    combustor CFD meshes 67.5 -> 75.8 and 86.6 -> 88.9 dB (192x192, 512 bins, an opacity
-    spike at data quantiles over a cool-to-warm map).
+    combustor CFD meshes 67.5 -> 75.7 and 86.6 -> 88.8 dB (512 bins, an opacity peak at
+    data quantiles, ramps 15 spacings wide, over a cool-to-warm map).
 
     >>> tf = TransferFunction.preset("viridis", (0.0, 1.0), opacity=0.5)
     >>> lo, hi = aligned_scalar_range((0.0, 1.0), tf, 256)
