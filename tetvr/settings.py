@@ -54,13 +54,14 @@ class RenderSettings:
     table_tolerance : the RMS per-segment error (premultiplied RGBA) an ``"auto"`` table
         size aims for; the cheapest table estimated within it is used (if none is, the
         most accurate auto size). The default 5e-5 (an 8-bit step is 3.9e-3) is met on
-        the synthetic benchmark scenes (97-104 dB from the reference), not on two CFD
-        meshes with spiky transfer functions (512 bins: 68 and 87 dB).
+        the synthetic benchmark scenes (106-110 dB from the reference), not on two CFD
+        meshes with spiky transfer functions (512 bins: 76 and 89 dB).
     table_align_nodes : place the table's scalar nodes so that the transfer function's
-        control points fall on nodes (:func:`tetvr.preintegrate.aligned_scalar_range`;
-        default ``True``), rather than spaced evenly over the range (``False``, the
-        former behaviour): a control point between nodes is cut off by the table's
-        linear ramp between them. Kept off where a ramp is narrower than two spacings.
+        control points, the sharpest kinks first, fall on nodes
+        (:func:`tetvr.preintegrate.aligned_scalar_range`; default ``True``), rather than
+        evenly over the range (``False``, the former behaviour): a control point between
+        nodes is cut off by the table's linear ramp between them. Even nodes are kept
+        where a ramp spans fewer than ten of them (there placement is a lottery).
     table_dtype : ``"float32"`` or ``"uint8"`` storage of the table.
     table_encoding : ``"normalized"`` stores colour/alpha and optical depth per unit
         length, so that alpha is exact in the thickness and only the (slowly varying)

@@ -46,10 +46,10 @@ tolerance:
 
 The estimates run at 1-10x the RMSE the image then has against the reference: the image
 composites several segments and covers background too. The default tolerance 5e-5 (an
-8-bit step is 3.9e-3) is met on the three synthetic benchmark scenes, which render 97-104 dB
-from the reference; the two CFD meshes' spiky transfer functions are not met within
-:data:`MAX_AUTO_ENTRIES` and get its most accurate table, 512 bins (68 and 87 dB, from 68
-and 72 dB at 256). The decision costs ~0.02 s per transfer function, a tenth of a 256-bin
+8-bit step is 3.9e-3) is met on the three synthetic benchmark scenes, which render 106-110 dB
+from the reference with aligned nodes; the two CFD meshes' spiky transfer functions are not
+met within :data:`MAX_AUTO_ENTRIES` and get its most accurate table, 512 bins (76 and 89 dB,
+from 68 and 72 dB at a fixed 256 x 256 x 17). The decision costs ~0.02 s per transfer function, a tenth of a 256-bin
 table's build. The thickness axis of an "auto" table spans d_max / span .. d_max with the
 span the optical depth of the thickest segment at the largest extinction, at least 8
 (:func:`auto_span`: below optical depth 1 the linear ramp to zero thickness is accurate);
