@@ -239,12 +239,13 @@ def aligned_scalar_range(scalar_range: tuple[float, float], tf: TransferFunction
     u = np.unique(np.concatenate([cx, ox]))
     jump = _slope_jumps(cx, color[:, 1:], u) + _slope_jumps(ox, opacity[:, 1:], u)
     ms = np.arange(n - 1, math.ceil(ALIGN_MIN_FRACTION * (n - 1)) - 1, -1, dtype=np.float64)  # finest first
-    f = u[None, :] * ms[:, None]
-    f -= np.floor(f)
+    x = u[None, :] * ms[:, None]
+    f = np.abs(x - np.round(x))  # distance to the nearest node, in spacings (rounding: ~1e-13 on one)
     cost = (jump[None, :] * f * (1.0 - f)).sum(axis=1) / ms
-    best = int(np.argmin(cost))  # the first of equal costs: the finest spacing
+    # Costs equal up to rounding are a tie, which goes to the finest spacing (the first).
+    best = int(np.argmax(cost <= cost.min() + 1e-9 * (jump.sum() / ms[0])))
     m = float(ms[best])
-    if best == 0 or not cost[best] < cost[0] or narrowest * m < ALIGN_MIN_RAMP_BINS:
+    if best == 0 or narrowest * m < ALIGN_MIN_RAMP_BINS:
         return lo, hi
     return lo, lo + (n - 1) * (hi - lo) / m
 
