@@ -118,3 +118,14 @@ def test_table_follows_the_transfer_function_asked_for():
             assert np.array_equal(table_b.data, want.data)
             assert not np.array_equal(table_b.data, table_a.data)
         assert r.table(mesh, tf_a) is table_a  # and back: the frame's table again
+
+
+def test_table_follows_settings_replaced_between_frames():
+    # Regression: the table cache was keyed on the scene only, so a renderer whose
+    # settings were replaced kept returning the table of the old size.
+    mesh = synthetic.cube(2)
+    tf = default_transfer_function(mesh, opacity=0.5)
+    with Renderer(RenderSettings(table_scalar_bins=32, table_thickness_slices=4)) as r:
+        assert r.table(mesh, tf).n_bins == 32
+        r.settings = RenderSettings(table_scalar_bins=64, table_thickness_slices=4)
+        assert r.table(mesh, tf).n_bins == 64

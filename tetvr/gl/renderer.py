@@ -252,9 +252,9 @@ class Renderer(GLOwner):
         """
         s = self.settings
         auto = "auto" in (s.table_scalar_bins, s.table_thickness_slices)
-        # An "auto" size depends on the mesh's cells (its segment sample), not only on the
-        # scalar range and the longest edge.
-        key = (tf, mesh.scalar_range, mesh.max_edge, segment_sample(mesh) if auto else None)
+        # The settings may be replaced between frames; an "auto" size also depends on the
+        # mesh's cells (its segment sample), not only on the scalar range and longest edge.
+        key = (s, tf, mesh.scalar_range, mesh.max_edge, segment_sample(mesh) if auto else None)
         if self._table_cache is not None and self._table_cache[0] == key:
             return self._table_cache[1]
         size = resolve_table_size(s, tf, mesh)
