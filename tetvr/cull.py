@@ -195,12 +195,12 @@ def zero_opacity(tf: TransferFunction, lo: NDArray[np.float64], hi: NDArray[np.f
     return np.asarray((a_lo == 0) & (a_hi == 0) & (inside <= 0))
 
 
-def gpu_scalar_margin(mesh: TetMesh, tf: TransferFunction, settings: Any = None, *, n_bins: int | None = None,
+def gpu_scalar_margin(mesh: TetMesh, tf: TransferFunction, settings: Any = None, *,
                       node_spacing: float | None = None) -> float:
     """The scalar margin under which culling leaves the GPU renderer's image unchanged.
 
-    Its pre-integration table has ``n_bins`` nodes (default: the settings'
-    ``table_scalar_bins``; for ``"auto"`` the fewest it may choose, the widest spacing)
+    Its pre-integration table has the settings' ``table_scalar_bins`` nodes (for
+    ``"auto"`` the fewest it may choose, the widest spacing)
     spanning the union of the mesh's range and the transfer function's domain
     (:func:`tetvr.preintegrate.table_for`), or with aligned nodes (the settings'
     ``table_align_nodes``) a spacing up to 1 / ``ALIGN_MIN_FRACTION`` wider; a lookup
@@ -214,8 +214,7 @@ def gpu_scalar_margin(mesh: TetMesh, tf: TransferFunction, settings: Any = None,
 
     if node_spacing is None:
         s = settings or RenderSettings()
-        if n_bins is None:
-            n_bins = min(AUTO_BINS) if s.table_scalar_bins == "auto" else int(s.table_scalar_bins)
+        n_bins = min(AUTO_BINS) if s.table_scalar_bins == "auto" else int(s.table_scalar_bins)
         lo = min(mesh.scalar_range[0], tf.domain[0])
         hi = max(mesh.scalar_range[1], tf.domain[1])
         spacings = (n_bins - 1) if not s.table_align_nodes else max(1, math.ceil(ALIGN_MIN_FRACTION * (n_bins - 1)))
