@@ -9,6 +9,7 @@ from typing import Any, Literal
 import numpy as np
 
 from .optics import OPTICS
+from .tablesize import DEFAULT_TOLERANCE
 
 __all__ = ["RenderSettings", "SORT_METHODS", "TABLE_ENCODINGS", "TABLE_DTYPES"]
 
@@ -94,7 +95,7 @@ class RenderSettings:
     table_scalar_bins: int | Literal["auto"] = "auto"
     table_thickness_slices: int | Literal["auto"] = "auto"
     table_log_base: float = 1.6
-    table_tolerance: float = 5e-5
+    table_tolerance: float = DEFAULT_TOLERANCE
     table_align_nodes: bool = True
     table_dtype: Literal["float32", "uint8"] = "float32"
     table_encoding: Literal["normalized", "premultiplied"] = "normalized"
