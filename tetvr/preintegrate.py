@@ -337,7 +337,9 @@ def build_table(
         tau_bin = 0.5 * (tau_node[:-1] + tau_node[1:])
     thick = d_max * log_base ** (np.arange(n_slices) - n_slices + 1.0)
 
-    rgb = np.zeros((n_slices, n_bins, n_bins, 3))  # [k, sb, sf]
+    # Built as [k, sf, sb] (each step of the run recurrence writes one contiguous row) and
+    # stored as [k, sb, sf]; theta and alpha are symmetric in (sf, sb).
+    rgb = np.zeros((n_slices, n_bins, n_bins, 3))
     theta = np.zeros((n_slices, n_bins, n_bins))
     # Optical depth is exact from the prefix sum of the bin means (Engel 2001).
     prefix = np.concatenate([[0.0], np.cumsum(tau_bin)])  # sum of tau over bins < i
@@ -356,23 +358,18 @@ def build_table(
         # Diagonal: constant scalar, closed form.
         rgb[:, i_idx, i_idx, :] = color[None] * (-np.expm1(-thick[:, None] * tau_node[None]))[..., None]
         # Off-diagonal: the incremental recurrence, forwards (sb > sf) and on the mirrored axis.
-        fwd = _diagonal_runs(color, tau_bin, thick)  # [k, n, i] -> entry (sf=i, sb=i+n)
-        bwd = _diagonal_runs(color[::-1], tau_bin[::-1], thick)  # mirrored: sf=N-1-i, sb=N-1-i-n
-        for n in range(1, n_bins):
-            i = np.arange(n_bins - n)
-            rgb[:, i + n, i, :] = fwd[:, n, : n_bins - n]
-            rgb[:, n_bins - 1 - i - n, n_bins - 1 - i, :] = bwd[:, n, : n_bins - n]
+        _fill_runs(rgb, color, tau_bin, thick)
     alpha = -np.expm1(-theta)
 
     table = np.zeros((n_slices + 1, n_bins, n_bins, 4))
     alpha_scale = 1.0
     if encoding == "premultiplied":
-        table[1:, ..., :3] = rgb
+        table[1:, ..., :3] = rgb.transpose(0, 2, 1, 3)
         table[1:, ..., 3] = alpha
     else:
         with np.errstate(invalid="ignore", divide="ignore"):
             chroma = np.where(alpha[..., None] > 1e-300, rgb / alpha[..., None], 0.0)
-        table[1:, ..., :3] = np.clip(chroma, 0.0, 1.0)
+        table[1:, ..., :3] = np.clip(chroma, 0.0, 1.0).transpose(0, 2, 1, 3)
         table[:, ..., 3] = np.minimum(mean_tau, _MAX_STORED_TAU)[None]
         table[0, ..., :3] = mean_color if optics == "vtk" else _thin_limit(color, tau_bin, tau_node, prefix)
         if dtype == "uint8":
@@ -392,42 +389,69 @@ def build_table(
 _cached = functools.lru_cache(maxsize=32)(build_table)
 
 
-def _diagonal_runs(color: NDArray[np.float64], tau_bin: NDArray[np.float64], thick: NDArray[np.floating[Any]]) -> NDArray[np.float64]:
-    """Premultiplied colour of every run of bins, for every slice: out[k, n, i] is the run
-    of n bins starting at node i, crossed front to back in total length thick[k].
+def _fill_runs(rgb: NDArray[np.float64], color: NDArray[np.float64], tau_bin: NDArray[np.float64],
+               thick: NDArray[np.floating[Any]]) -> None:
+    """Premultiplied colour of every run of bins, for every slice, written in place:
+    ``rgb[k, sf, sb]`` for ``sf != sb`` is the segment from node sf to node sb crossed in
+    total length ``thick[k]`` (clipped at 0).
 
-    Runs of the same n share one step length d/n, so each diagonal is a sliding window,
-    filled from the last node down by the stable add-front/remove-back recurrence.
+    Runs of the same length n share one step length d/n, so each diagonal is a sliding
+    window, filled from the last front node down by the stable add-front/remove-back
+    recurrence; the recurrence runs once forwards (sb > sf) and once on the mirrored axis.
     """
     n_bins = color.shape[0]
     nb = n_bins - 1
     n = np.arange(1, n_bins)  # run lengths
     step = thick[:, None] / n[None, :]  # [k, n]
-    # Per-bin emission and transmittance for each step length; bins past the end are empty.
-    th = step[:, :, None] * tau_bin[None, None, :]  # [k, n, m]
+    # Per-bin emission and transmittance for each step length, bin first ([m, k, n]) so
+    # that each step of the recurrence reads one contiguous block.
+    th = tau_bin[:, None, None] * step[None]
     t_bin = np.exp(-th)
     with np.errstate(invalid="ignore", divide="ignore"):
         phi = np.where(th > 1e-12, -np.expm1(-th) / np.where(th > 0, th, 1.0), 1.0 - 0.5 * th)
-    c0 = color[None, None, :-1, :]
-    c1 = color[None, None, 1:, :]
-    c_bin = c0 - c1 * t_bin[..., None] + (c1 - c0) * phi[..., None]
-    c_bin *= (th > 0)[..., None]  # a transparent bin emits nothing (guards rounding)
-    prefix = np.concatenate([[0.0], np.cumsum(tau_bin)])
+    emits = th > 0  # a transparent bin emits nothing (guards rounding)
+    dc = color[1:] - color[:-1]
 
-    out = np.zeros((thick.shape[0], n_bins, n_bins, 3))
-    w = np.zeros((thick.shape[0], nb, 3))  # window sums, one per run length
-    k_idx = np.arange(thick.shape[0])[:, None]
-    n_idx = np.arange(nb)[None, :]
-    for i in range(nb - 1, -1, -1):
-        back = i + n  # bin leaving the window at the back
-        inside = back < nb
-        back_c = np.where(inside[None, :, None], c_bin[k_idx, n_idx, np.minimum(back, nb - 1)], 0.0)
-        # Transmittance of bins i+1 .. i+n-1 (those between the front and the leaving bin).
-        between = prefix[np.minimum(back, nb)] - prefix[i + 1]
-        t_between = np.exp(-step * between[None, :])
-        w = c_bin[:, :, i, :] + t_bin[:, :, i, None] * (w - t_between[..., None] * back_c)
-        out[:, 1:, i, :] = w
-    return np.clip(out, 0.0, None)
+    def bin_colours(start: NDArray[np.float64], end: NDArray[np.float64], slope: NDArray[np.float64]) -> NDArray[np.float64]:
+        # Emission of each bin crossed from its start node to its end node: [m, 3, k, n].
+        out = np.empty((nb, 3, *step.shape))
+        for ch in range(3):
+            o = out[:, ch]
+            np.multiply(end[:, ch, None, None], t_bin, out=o)
+            np.subtract(start[:, ch, None, None], o, out=o)
+            o += slope[:, ch, None, None] * phi
+            o *= emits
+        return out
+
+    for forwards in (True, False):
+        if forwards:  # front node i, bins i .. i+n-1
+            c_bin = bin_colours(color[:-1], color[1:], dc)
+            t_run, taus = t_bin, tau_bin
+        else:  # mirrored: front node N-1-i, bins N-2-i down to N-1-i-n (the same bins reversed)
+            c_bin = bin_colours(color[1:], color[:-1], -dc)[::-1]
+            t_run, taus = t_bin[::-1], tau_bin[::-1]
+        prefix = np.concatenate([[0.0], np.cumsum(taus)])
+        # leaving[i, :, k, j] = c_bin[i + j + 1, :, k, j]: the bin leaving a run of j + 1
+        # bins that starts at bin i + 1, a skewed view (read only where i + j + 1 < nb).
+        s0, s1, s2, s3 = c_bin.strides
+        leaving = np.lib.stride_tricks.as_strided(c_bin[1:], shape=c_bin.shape,
+                                                  strides=(s0, s1, s2, s3 + s0), writeable=False)
+        w = np.zeros((3, thick.shape[0], nb))  # window sums, one per run length
+        w_out = w.transpose(1, 2, 0)  # [k, n, 3]
+        for i in range(nb - 1, -1, -1):
+            v = nb - 1 - i  # runs that lose a bin at the back; longer ones reach past the end
+            if v:
+                # Transmittance of bins i+1 .. i+n-1 (those between the front and the leaving bin).
+                between = prefix[i + 1: i + 1 + v] - prefix[i + 1]
+                t_between = np.exp(-step[:, :v] * between[None, :])
+                w[:, :, :v] -= t_between * leaving[i, :, :, :v]
+            w *= t_run[i]
+            w += c_bin[i]
+            if forwards:
+                np.maximum(w_out[:, : nb - i], 0.0, out=rgb[:, i, i + 1:, :])
+            else:
+                f = nb - i  # the front node on the unmirrored axis; sb runs f-1 .. 0
+                np.maximum(w_out[:, :f], 0.0, out=rgb[:, f, f - 1::-1, :])
 
 
 def _thin_limit(color: NDArray[np.float64], tau_bin: NDArray[np.float64], tau_node: NDArray[np.float64],
