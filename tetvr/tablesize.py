@@ -95,9 +95,9 @@ SPAN_BOUNDS = (8.0, 1e6)
 #: Segments sampled per mesh.
 _N_SEGMENTS = 4096
 #: The largest "auto" table, N * N * (K + 1) entries: 256 x 256 x 44 or 512 x 512 x 9,
-#: ~1 s to build here and 45 MiB of float32 texture. Bigger tables would build for
-#: seconds and hold hundreds of MiB in the build's temporaries on every transfer-function
-#: change; a scene that wants them can name its sizes.
+#: ~0.3 s to build here and 36-45 MiB of float32 texture. Bigger tables would build for
+#: a second or more and hold hundreds of MiB in the build's temporaries on every
+#: transfer-function change; a scene that wants them can name its sizes.
 MAX_AUTO_ENTRIES = 256 * 256 * 44
 #: Ties in the estimate (relative) go to the cheaper table when none meets the tolerance.
 _TIE = 0.1
