@@ -208,7 +208,7 @@ def gpu_scalar_margin(mesh: TetMesh, tf: TransferFunction, settings: Any = None,
     ``node_spacing`` (a built table's, :attr:`PreintegrationTable.node_spacing`) replaces
     that bound. The extra 1 % covers float32 rounding of the texture coordinate.
     """
-    from .preintegrate import ALIGN_MIN_FRACTION
+    from .preintegrate import fewest_spacings
     from .settings import RenderSettings
     from .tablesize import AUTO_BINS
 
@@ -217,7 +217,7 @@ def gpu_scalar_margin(mesh: TetMesh, tf: TransferFunction, settings: Any = None,
         n_bins = min(AUTO_BINS) if s.table_scalar_bins == "auto" else int(s.table_scalar_bins)
         lo = min(mesh.scalar_range[0], tf.domain[0])
         hi = max(mesh.scalar_range[1], tf.domain[1])
-        spacings = (n_bins - 1) if not s.table_align_nodes else max(1, math.ceil(ALIGN_MIN_FRACTION * (n_bins - 1)))
+        spacings = fewest_spacings(n_bins) if s.table_align_nodes else n_bins - 1
         node_spacing = (hi - lo) / spacings
     return 1.01 * node_spacing
 

@@ -51,7 +51,7 @@ from numpy.typing import NDArray
 from .optics import MAX_OPACITY, OPTICS, mean_neg_log
 from .transfer import TransferFunction
 
-__all__ = ["PreintegrationTable", "build_table", "table_for", "table_scalar_range", "aligned_scalar_range"]
+__all__ = ["PreintegrationTable", "build_table", "table_for", "table_scalar_range", "aligned_scalar_range", "fewest_spacings"]
 
 # Largest extinction (per world unit) stored in a "normalized" table. A tiny unit distance
 # gives extinctions past float32's range: stored as inf, the shader's d * inf at d = 0 is
@@ -191,6 +191,12 @@ ALIGN_MIN_FRACTION = 0.9
 ALIGN_MIN_RAMP_BINS = 10.0
 
 
+def fewest_spacings(n_bins: int) -> int:
+    """The fewest node spacings :func:`aligned_scalar_range` may put over the range
+    (its widest spacing is ``(hi - lo) / fewest_spacings(n_bins)``)."""
+    return max(1, math.ceil(ALIGN_MIN_FRACTION * (n_bins - 1)))
+
+
 def _slope_jumps(x: NDArray[np.float64], y: NDArray[np.float64], at: NDArray[np.float64]) -> NDArray[np.float64]:
     """|slope on the right - slope on the left| of the piecewise-linear map through the
     points (x ascending, y of shape (len(x), channels); flat beyond the ends) at ``at``,
@@ -238,7 +244,7 @@ def aligned_scalar_range(scalar_range: tuple[float, float], tf: TransferFunction
     narrowest = min(float(np.diff(x).min()) if x.size > 1 else 1.0 for x in (cx, ox))
     u = np.unique(np.concatenate([cx, ox]))
     jump = _slope_jumps(cx, color[:, 1:], u) + _slope_jumps(ox, opacity[:, 1:], u)
-    ms = np.arange(n - 1, math.ceil(ALIGN_MIN_FRACTION * (n - 1)) - 1, -1, dtype=np.float64)  # finest first
+    ms = np.arange(n - 1, fewest_spacings(n) - 1, -1, dtype=np.float64)  # finest first
     x = u[None, :] * ms[:, None]
     f = np.abs(x - np.round(x))  # distance to the nearest node, in spacings (rounding: ~1e-13 on one)
     cost = (jump[None, :] * f * (1.0 - f)).sum(axis=1) / ms

@@ -49,7 +49,7 @@ composites several segments and covers background too. The default tolerance 5e-
 8-bit step is 3.9e-3) is met on the three synthetic benchmark scenes, which render 106-110 dB
 from the reference with aligned nodes; the two CFD meshes' spiky transfer functions are not
 met within :data:`MAX_AUTO_ENTRIES` and get its most accurate table, 512 bins (76 and 89 dB,
-from 68 and 72 dB at a fixed 256 x 256 x 17). The decision costs ~0.02 s per transfer function, a tenth of a 256-bin
+from 68 and 72 dB at a fixed 256 x 256 x 17). The decision costs ~0.02 s per transfer function, a third of a 256-bin
 table's build. The thickness axis of an "auto" table spans d_max / span .. d_max with the
 span the optical depth of the thickest segment at the largest extinction, at least 8
 (:func:`auto_span`: below optical depth 1 the linear ramp to zero thickness is accurate);
@@ -75,7 +75,7 @@ __all__ = ["SegmentSample", "TableSize", "sample_segments", "scalar_axis_error",
            "choose_table_size", "auto_span", "cache_clear", "AUTO_BINS", "AUTO_SLICES", "DEFAULT_TOLERANCE", "MAX_AUTO_ENTRIES"]
 
 #: Candidate scalar bins of an "auto" table. Below 256 the build is already cheap
-#: (0.15 s) and the frame no faster; above 512 the build takes seconds and 150 MiB+.
+#: (0.06 s) and the frame no faster; above 512 the build takes seconds (1024: 3 s) and 150 MiB+.
 AUTO_BINS = (256, 512)
 #: Candidate thickness slices: K - 1 divides _FINE_STEPS, so each is a subset of one table.
 AUTO_SLICES = (8, 15, 22, 29, 43)
