@@ -15,11 +15,46 @@
 
 layout(local_size_x = 64) in;
 layout(std430, binding = 2) writeonly buffer Fans { TetFan fans[]; };
+// How many fans take the exact path: the renderer compiles tet.frag's exact branch in
+// only for draws that have some (it slows llvmpipe's fragment stage when merely present).
+layout(std430, binding = 4) buffer ExactCount { uint n_exact; };
 
 uniform int u_offset;
 uniform int u_count;
+uniform vec2 u_half_px;  // NDC -> pixels: half the viewport size
+
 
 float cross2(vec2 a, vec2 b) { return a.x * b.y - a.y * b.x; }
+
+// The fan of a tet intersected exactly per fragment (tet.frag): the screen rectangle
+// bounding its part beyond the near plane (its vertices there, and where its edges cross
+// the plane), clamped to the viewport.
+void exact_fan(int t, vec2 p_ndc[4], vec3 p_eye[4]) {
+    vec2 lo = vec2(1e30), hi = vec2(-1e30);
+    for (int a = 0; a < 4; ++a) {
+        float da = -p_eye[a].z - u_near;
+        if (da >= 0.0) {
+            lo = min(lo, p_ndc[a]); hi = max(hi, p_ndc[a]);
+        }
+        for (int b = a + 1; b < 4; ++b) {
+            float db = -p_eye[b].z - u_near;
+            if ((da < 0.0) != (db < 0.0)) {
+                vec3 q = mix(p_eye[a], p_eye[b], da / (da - db));
+                vec4 c = u_proj * vec4(q, 1.0);
+                vec2 n = c.xy / c.w;
+                lo = min(lo, n); hi = max(hi, n);
+            }
+        }
+    }
+    TetFan fan;
+    fan.ids = ivec4(-1 - t, 0, 0, FAN_NEAR);
+    // One pixel of margin: the rectangle must cover every pixel centre inside the tet.
+    vec2 pad = 1.0 / u_half_px;
+    fan.front = vec4(clamp(lo - pad, -1.0, 1.0), clamp(hi + pad, -1.0, 1.0));
+    fan.back = vec4(0.0);
+    fans[t] = fan;
+    atomicAdd(n_exact, 1u);
+}
 
 void main() {
     int t = int(gl_GlobalInvocationID.x) + u_offset;
@@ -46,36 +81,21 @@ void main() {
     TetFan fan;
     if (culled || beyond) {
         // Wholly outside the clipping range: nothing to draw.
-        fan.ids = ivec4(0, 0, 0, -2);
+        fan.ids = ivec4(0, 0, 0, FAN_CLIPPED);
         fan.front = vec4(0.0);
         fan.back = vec4(0.0);
         fans[t] = fan;
         return;
     }
-    if (behind) {
-        // Crosses the near plane: drawn as a screen rectangle bounding the part of the tet
-        // beyond the near plane (its vertices there, and where its edges cross the plane),
-        // each fragment intersecting its ray with the tet exactly.
-        vec2 lo = vec2(1e30), hi = vec2(-1e30);
-        for (int a = 0; a < 4; ++a) {
-            float da = -p_eye[a].z - u_near;
-            if (da >= 0.0) {
-                lo = min(lo, p_ndc[a]); hi = max(hi, p_ndc[a]);
-            }
-            for (int b = a + 1; b < 4; ++b) {
-                float db = -p_eye[b].z - u_near;
-                if ((da < 0.0) != (db < 0.0)) {
-                    vec3 q = mix(p_eye[a], p_eye[b], da / (da - db));
-                    vec4 c = u_proj * vec4(q, 1.0);
-                    vec2 n = c.xy / c.w;
-                    lo = min(lo, n); hi = max(hi, n);
-                }
-            }
-        }
-        fan.ids = ivec4(-1 - t);
-        fan.front = vec4(clamp(lo, -1.0, 1.0), clamp(hi, -1.0, 1.0));
-        fan.back = vec4(0.0);
-        fans[t] = fan;
+    // A vertex projecting far outside the viewport (a tet beside the eye) makes triangles
+    // the GL clips at its guard band, and the clipped vertices' screen-linear attributes
+    // lose the segment (alpha off by up to 0.07 at 64x64 from a vertex at 1/30 of the view
+    // depth). Such tets take the exact path of near-plane tets: the rectangle is then the
+    // bounding box of the vertices' projections, clamped to the viewport.
+    bool huge = false;
+    for (int k = 0; k < 4; ++k) huge = huge || any(greaterThan(abs(p_ndc[k]), vec2(EXACT_NDC)));
+    if (behind || huge) {
+        exact_fan(t, p_ndc, p_eye);
         return;
     }
 
@@ -131,7 +151,7 @@ void main() {
         s0 = s[k];
         p1 = pw.x * p_eye[a] + pw.y * p_eye[b] + pw.z * p_eye[c];
         s1 = pw.x * s[a] + pw.y * s[b] + pw.z * s[c];
-        fan.ids = ivec4(id[a], id[b], id[c], -1);
+        fan.ids = ivec4(id[a], id[b], id[c], FAN_TRIANGLE);
     } else {
         ivec4 e = pairs[best_pair];
         vec2 ts = clamp(pair_param, 0.0, 1.0);

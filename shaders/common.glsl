@@ -10,13 +10,21 @@
 //   binding 2  Fans    one TetFan per tet
 //   binding 3  Order   uint tet ids, back to front
 
+// TetFan.ids.w markers: a vertex id (>= 0) for a 4-vertex silhouette, else one of these.
+// They are distinct from each other and from every vertex id, whatever the tet's index.
+#define FAN_TRIANGLE (-1)  // 3-vertex silhouette (ids.xyz)
+#define FAN_CLIPPED (-2)   // wholly outside the clipping range: nothing to draw
+#define FAN_NEAR (-3)      // crosses the near plane (or the eye plane), where its projection is
+                           // unbounded: drawn as the screen rectangle bounding its part beyond
+                           // the near plane (front = (x_lo, y_lo, x_hi, y_hi) in NDC), whose
+                           // fragments intersect their ray with the tet exactly; ids.x = -1 - tet
+
+// Tets with a vertex projecting beyond this NDC bound take the exact per-fragment path
+// (classify.comp); tetvr.gl.renderer.EXACT_NDC is the same bound for the CPU's check.
+#define EXACT_NDC 8.0
+
 struct TetFan {
-    ivec4 ids;     // silhouette vertices in cyclic order; ids.w == -1 for a 3-vertex silhouette,
-                   // ids.w == -2 if the tet lies wholly outside the clipping range.
-                   // ids.x < 0: the tet crosses the near plane (or the eye plane), where its
-                   // projection is unbounded: it is drawn as the screen rectangle bounding its
-                   // part beyond the near plane (front = (x_lo, y_lo, x_hi, y_hi) in NDC), whose
-                   // fragments intersect their ray with the tet exactly (tet id = -1 - ids.x).
+    ivec4 ids;     // silhouette vertices in cyclic order, ids.w a vertex id or a FAN_* marker
     vec4 front;    // thick vertex, front point: xyz_eye, scalar
     vec4 back;     // thick vertex, back point:  xyz_eye, scalar
 };

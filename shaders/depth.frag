@@ -7,8 +7,10 @@
 //      with the nearest front and the farthest back over all tets at each pixel.
 
 #include "common.glsl"
+#include "exact.glsl"
 
 noperspective in vec4 v_segment;
+noperspective in vec2 v_ray;
 flat in int v_exact_tet;
 
 out vec2 f_extent;
@@ -16,14 +18,11 @@ out vec2 f_extent;
 void main() {
     float zf, zb;
     if (v_exact_tet >= 0) {
-        // Near-plane tets: the segment may start at the near plane; a conservative extent
-        // from the tet's vertex depths is enough for ray limits.
-        ivec4 id = tets[v_exact_tet];
-        zf = 1e30; zb = -1e30;
-        for (int k = 0; k < 4; ++k) {
-            float z = -(u_view * vec4(points[id[k]].xyz, 1.0)).z;
-            zf = min(zf, z); zb = max(zb, z);
-        }
+        // Tets on the exact path (near-plane tets among them): the ray's own segment.
+        vec4 seg = exact_ray_segment(v_exact_tet, v_ray);
+        if (seg.y <= seg.x) discard;
+        zf = seg.x;
+        zb = seg.y;
     } else {
         zf = v_segment.x;
         zb = v_segment.z;

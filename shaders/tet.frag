@@ -13,6 +13,7 @@
 
 #include "common.glsl"
 #include "lookup.glsl"
+#include "exact.glsl"
 
 noperspective in vec4 v_segment;
 noperspective in vec2 v_ray;  // eye-space x/depth, y/depth of the pixel's ray in perspective,
@@ -21,39 +22,16 @@ flat in int v_exact_tet;
 
 out vec4 f_color;
 
-// The ray of this pixel against the tet's four face planes (for tets crossing the near
-// plane, whose projection cannot be fanned). Ray parameter t = eye depth.
+// The ray of this pixel through one tet, exactly (exact.glsl).
 void exact_segment(int tet) {
-    ivec4 id = tets[tet];
-    vec3 p[4];
-    float s[4];
-    for (int k = 0; k < 4; ++k) {
-        vec4 q = points[id[k]];
-        p[k] = (u_view * vec4(q.xyz, 1.0)).xyz;
-        s[k] = q.w;
-    }
+    vec4 seg = exact_ray_segment(tet, v_ray);  // (t0, t1, sf, sb)
+    if (seg.y <= seg.x) discard;
 #if PERSPECTIVE
-    vec3 o = vec3(0.0), d = vec3(v_ray, -1.0);
+    float per_depth = length(vec3(v_ray, 1.0));
 #else
-    vec3 o = vec3(v_ray, 0.0), d = vec3(0.0, 0.0, -1.0);
+    const float per_depth = 1.0;
 #endif
-    float t0 = u_near, t1 = u_far;
-    for (int k = 0; k < 4; ++k) {
-        vec3 a = p[(k + 1) & 3], b = p[(k + 2) & 3], c = p[(k + 3) & 3];
-        vec3 n = cross(b - a, c - a);
-        if (dot(n, p[k] - a) > 0.0) n = -n;  // outward
-        float den = dot(n, d), num = dot(n, a - o);
-        if (den < 0.0) t0 = max(t0, num / den);
-        else if (den > 0.0) t1 = min(t1, num / den);
-        else if (num < 0.0) discard;
-    }
-    if (t1 <= t0) discard;
-    mat3 e = mat3(p[1] - p[0], p[2] - p[0], p[3] - p[0]);
-    mat3 inv = inverse(e);
-    vec3 ds = vec3(s[1] - s[0], s[2] - s[0], s[3] - s[0]);
-    float sf = s[0] + dot(inv * (o + t0 * d - p[0]), ds);
-    float sb = s[0] + dot(inv * (o + t1 * d - p[0]), ds);
-    f_color = lookup_segment(sf, sb, (t1 - t0) * length(d));
+    f_color = lookup_segment(seg.z, seg.w, (seg.y - seg.x) * per_depth);
 }
 
 void main() {

@@ -45,12 +45,12 @@ void main() {
     TetFan fan = fans[tet];
     v_exact_tet = -1;
     v_segment = vec4(0.0);
-    if (fan.ids.w == -2) {
+    if (fan.ids.w == FAN_CLIPPED) {
         // Wholly outside the clipping range: every vertex at one point outside the view.
         emit(vec2(2.0));
         return;
     }
-    if (fan.ids.x < 0) {
+    if (fan.ids.w == FAN_NEAR) {
         // Crosses the near plane: the screen rectangle classify.comp bounded it by
         // (fan.front = (x_lo, y_lo, x_hi, y_hi) in NDC), fanned from its centre.
         const vec2 corner[5] = vec2[5](vec2(0.5), vec2(0.0, 0.0), vec2(1.0, 0.0), vec2(1.0, 1.0), vec2(0.0, 1.0));
@@ -64,7 +64,7 @@ void main() {
         front_eye = fan.front.xyz; sf = fan.front.w;
         back_eye = fan.back.xyz;   sb = fan.back.w;
     } else {
-        vec4 p = points[fan.ids[slot == 4 && fan.ids.w < 0 ? 0 : slot - 1]];
+        vec4 p = points[fan.ids[slot == 4 && fan.ids.w == FAN_TRIANGLE ? 0 : slot - 1]];
         front_eye = (u_view * vec4(p.xyz, 1.0)).xyz;
         back_eye = front_eye;
         sf = p.w; sb = p.w;

@@ -32,15 +32,20 @@ def gl_object(make: Callable[[], Any], what: str) -> Iterator[Any]:
     except GLUnavailableError as exc:  # pragma: no cover - CI has Mesa's EGL
         pytest.fail(f"{what}: {exc}")
     yield obj
-    assert obj.ctx.error == "GL_NO_ERROR"
+    from tetvr.gl.context import current_in_thread
+
+    with current_in_thread(obj.ctx):  # the context is current nowhere between calls
+        assert obj.ctx.error == "GL_NO_ERROR"
     obj.release()
 
 
-@pytest.fixture(scope="module")
-def renderer():
+@pytest.fixture(scope="module", params=["projected", "raymarch"])
+def renderer(request):
+    """A GL renderer of each method: every test that takes it runs for both."""
+    from tetvr import RenderSettings
     from tetvr.gl import Renderer
 
-    yield from gl_object(Renderer, "no OpenGL 4.3 context")
+    yield from gl_object(lambda: Renderer(RenderSettings(method=request.param)), "no OpenGL 4.3 context")
 
 
 def save_failure(name: str, got: np.ndarray, want: np.ndarray) -> Path:

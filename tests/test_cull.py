@@ -140,7 +140,8 @@ def test_renderer_cull_setting_keeps_the_image():
                                  unit_distance=0.3)
     cam = Camera.fit(mesh, direction=(-0.3, -0.2, -1.0), zoom=2.0)
     for sort in ("centroid", "mpvonc"):
-        with tetvr.Renderer(RenderSettings(sort=sort)) as a, tetvr.Renderer(RenderSettings(sort=sort, cull=True)) as b:
+        with tetvr.Renderer(RenderSettings(sort=sort, method="projected")) as a, \
+                tetvr.Renderer(RenderSettings(sort=sort, cull=True, method="projected")) as b:
             full = a.render(mesh, cam, tf, size=(64, 64))
             culled = b.render(mesh, cam, tf, size=(64, 64))
             assert b.last_stats.n_culled > mesh.n_tets // 4

@@ -81,10 +81,20 @@ def test_missing_gl_gives_an_install_hint(monkeypatch):
 
 def test_gpu_bytes_counts_what_the_renderer_holds():
     mesh = synthetic.cube(2)
-    with Renderer(RenderSettings(table_scalar_bins=32, table_thickness_slices=4)) as r:
+    table = 5 * 32 * 32 * 16
+    with Renderer(RenderSettings(table_scalar_bins=32, table_thickness_slices=4, method="projected")) as r:
         r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(16, 8))
         # points, tets + fans + order + fan indices (12 uint32 per tet), table, target
-        expected = (mesh.n_points * 16 + mesh.n_tets * (16 + 48 + 4 + 48) + 5 * 32 * 32 * 16 + 16 * 8 * 16)
+        expected = (mesh.n_points * 16 + mesh.n_tets * (16 + 48 + 4 + 48) + table + 16 * 8 * 16)
+        assert r.gpu_bytes() == expected
+    with Renderer(RenderSettings(table_scalar_bins=32, table_thickness_slices=4, method="raymarch")) as r:
+        r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(16, 8))
+        # records: one row of up to 4096 tets (5 RGBA32F texels each) and 48 tets (8192 per row of
+        # RGBA32I mates), boundary faces (3 corners: 3 floats + 1 int), table, targets
+        # (entry id + depth, and two sets of colour, state and last entry)
+        n_faces = 6 * 4 * 2  # two triangles on each of a 2x2 grid of squares per cube side
+        tets_per_row = min(r.ctx.info["GL_MAX_TEXTURE_SIZE"] // 5, 4096)
+        expected = (tets_per_row * 5 * 16 + 8192 * 16 + n_faces * 3 * 16 + table + 16 * 8 * (4 + 4 + 2 * (16 + 8 + 4)))
         assert r.gpu_bytes() == expected
 
 
@@ -92,9 +102,10 @@ def test_viewer_blit_shaders_compile():
     from tetvr.gl.shaders import assemble
 
     with Renderer() as r:
-        prog = r.ctx.program(vertex_shader=assemble("blit.vert")[0], fragment_shader=assemble("blit.frag")[0])
-        assert r.ctx.error == "GL_NO_ERROR"
-        prog.release()
+        with r.ctx:
+            prog = r.ctx.program(vertex_shader=assemble("blit.vert")[0], fragment_shader=assemble("blit.frag")[0])
+            assert r.ctx.error == "GL_NO_ERROR"
+            prog.release()
 
 
 def test_table_follows_the_transfer_function_asked_for():

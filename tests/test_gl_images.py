@@ -223,7 +223,8 @@ def test_chunked_drawing_is_identical():
     mesh = synthetic.cube(4)
     cam = Camera.fit(mesh, direction=(-0.3, -0.2, -1.0))
     tf = _tf(mesh)
-    with tetvr.Renderer() as whole, tetvr.Renderer(chunk_tets=50) as chunked:
+    pt = tetvr.RenderSettings(method="projected")  # chunks are projected tetrahedra's
+    with tetvr.Renderer(pt) as whole, tetvr.Renderer(pt, chunk_tets=50) as chunked:
         a = whole.render(mesh, cam, tf, size=(64, 64))
         b = chunked.render(mesh, cam, tf, size=(64, 64))
         fa, ba = whole.depth_extent(mesh, cam, size=(64, 64))
@@ -242,11 +243,12 @@ def test_draw_batches_and_index_buffer_growth_are_identical(monkeypatch):
     small = synthetic.cube(1)  # 6 tets
     cam = Camera.fit(mesh, direction=(-0.3, -0.2, -1.0))
     tf = _tf(mesh)
-    with tetvr.Renderer() as r:
+    pt = tetvr.RenderSettings(method="projected")  # draw batches are projected tetrahedra's
+    with tetvr.Renderer(pt) as r:
         want = r.render(mesh, cam, tf, size=(64, 64))
         want_front, want_back = r.depth_extent(mesh, cam, size=(64, 64))
     monkeypatch.setattr(gl_renderer, "_DRAW_BATCH", 37)  # 11 draw calls, the last one partial
-    with tetvr.Renderer() as r:
+    with tetvr.Renderer(pt) as r:
         r.render(small, Camera.fit(small), _tf(small), size=(16, 16))
         assert r._fan_indices.size == small.n_tets * 12 * 4  # sized for the small mesh first
         got = r.render(mesh, cam, tf, size=(64, 64))
@@ -268,7 +270,7 @@ def test_mpvonc_is_exact_on_a_convex_mesh_in_perspective():
     want = render_reference(mesh, cam, tf, (128, 128))
     errors = {}
     for sort in ("centroid", "mpvonc"):
-        with tetvr.Renderer(tetvr.RenderSettings(sort=sort)) as r:
+        with tetvr.Renderer(tetvr.RenderSettings(sort=sort, method="projected")) as r:
             got = r.render(mesh, cam, tf, size=(128, 128))
             assert r.last_stats.cycle_breaks == 0
         errors[sort] = (np.abs(got - want).max(), psnr(got, want))

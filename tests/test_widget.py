@@ -218,6 +218,7 @@ def test_model_progressive_frames_reuse_the_order(tmp_path, monkeypatch):
     monkeypatch.setattr(tetvr.sort, "visibility_order", lambda m, c, s: sorts.append(c) or real(m, c, s))
     rec, clock = RecordingRenderer(), Clock()
     model = ViewerModel(_scene(tmp_path), renderer=rec, clock=clock, preview_scale=0.5, settle_s=0.3)
+    model.settings = dataclasses.replace(model.settings, method="projected")  # the ray caster needs no order
     model.final()
     assert rec.calls[-1]["size"] == (80, 60) and len(sorts) == 1
     first_order = rec.calls[-1]["order"]

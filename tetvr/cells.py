@@ -52,11 +52,14 @@ import functools
 import itertools
 import os
 import re
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from ._checks import check_input_file
 
 __all__ = [
     "VOLUME_CELLS",
@@ -365,13 +368,21 @@ def split_cells(points: ArrayLike, blocks: Sequence[tuple[str, Any]]) -> CellSpl
         if conn.size == 0:
             offset += count
             continue
-        if conn.ndim != 2 or conn.shape[1] < max(pick) + 1 or conn.dtype.kind not in "iu":
+        if conn.ndim != 2 or conn.shape[1] < max(pick) + 1 or conn.dtype.kind not in "iuf":
             raise ValueError(f"block {i} ({ctype}) must be an integer array of shape (k, >= {max(pick) + 1}), "
                              f"got {conn.dtype} {conn.shape}")
-        corners = conn[:, list(pick)].astype(np.int64)
+        corners = conn[:, list(pick)]
+        if corners.dtype.kind == "f":  # ids stored as floats: checked before the cast (inf -> -2**63)
+            wrong = ~np.isfinite(corners) | (corners != np.round(corners))
+            if np.any(wrong):
+                row, col = np.argwhere(wrong)[0]
+                raise ValueError(f"block {i} ({ctype}) has node id {corners[row, col]} in cell {row}: "
+                                 "node ids must be integers")
         if corners.min() < 0 or corners.max() >= n_pts:
-            bad = int(corners.min()) if corners.min() < 0 else int(corners.max())
-            raise ValueError(f"block {i} ({ctype}) indexes point {bad}, outside 0..{n_pts - 1}")
+            bad = corners.min() if corners.min() < 0 else corners.max()
+            shown = f"{bad:g}" if corners.dtype.kind == "f" else int(bad)
+            raise ValueError(f"block {i} ({ctype}) indexes point {shown}, outside 0..{n_pts - 1}")
+        corners = corners.astype(np.int64)
         by_shape[shape].append((corners, np.arange(offset, offset + count, dtype=np.int64)))
         if ctype != "tetra":
             split[ctype] = split.get(ctype, 0) + count
@@ -521,7 +532,7 @@ def read_cells(path: str | os.PathLike[str], *, meshio_read: Callable[[str], Any
     >>> cells.split.split, cells.reader  # doctest: +SKIP
     ((('hexahedron', 2),), 'legacy-vtk')
     """
-    path = os.fspath(path)
+    path = check_input_file(path, "mesh file")  # never hands meshio a FIFO, a loop of links, ...
     if meshio_read is None:
         import meshio  # deferred: importing meshio costs ~0.3 s
 
@@ -550,19 +561,30 @@ def read_cells(path: str | os.PathLike[str], *, meshio_read: Callable[[str], Any
     if split.tets.shape[0] == 0:
         found = ", ".join(f"{k}: {v}" for k, v in split.ignored) or "no cells"
         raise ValueError(f"{path!r} contains no tetrahedra or other volume cells ({found})")
+    # A field of the wrong length is a corrupt file: said here, naming it, rather than
+    # left out to surface later as "no field named ...".
+    for name, v in point_data.items():
+        if v.shape[:1] != (points.shape[0],):
+            raise ValueError(f"{path!r}: point field {name!r} has {v.shape[0] if v.ndim else 0} values "
+                             f"(shape {v.shape}), but the mesh has {points.shape[0]} points")
     used = np.zeros(split.points.shape[0], dtype=bool)
     used[split.tets.ravel()] = True
-    pdata = {k: split.extend(v)[used] for k, v in point_data.items() if v.shape[:1] == (points.shape[0],)}
+    pdata = {k: split.extend(v)[used] for k, v in point_data.items()}
     if not np.all(used):
         split = split.compacted(used)
     cdata: dict[str, NDArray[Any]] = {}
-    n_cells = sum(len(d) for _, d in blocks)
     for name, per_block in cell_blocks.items():
+        got = [len(b) for b in per_block]
+        want = [len(d) for _, d in blocks]
+        if got != want:
+            raise ValueError(f"{path!r}: cell field {name!r} has {sum(got)} values in {len(got)} blocks {got}, "
+                             f"but the mesh has {sum(want)} cells in {len(want)} blocks {want}")
         try:
             flat = np.concatenate([np.asarray(b).reshape(len(b), -1) for b in per_block])
         except ValueError:  # blocks with different component counts: not one field
-            continue
-        if flat.shape[0] != n_cells:
+            shapes = sorted({np.asarray(b).shape[1:] for b in per_block})
+            warnings.warn(f"{os.path.basename(path)}: cell field {name!r} is left out: its blocks have different "
+                          f"component shapes {shapes}", stacklevel=3)
             continue
         col = flat[split.parent]
         cdata[name] = col[:, 0] if col.shape[1] == 1 else col
@@ -598,7 +620,12 @@ _TOKEN = re.compile(rb"\s*(\S+)")
 
 
 class _Cursor:
-    """Tokens, lines and binary blocks of a legacy VTK file."""
+    """Tokens, lines and binary blocks of a legacy VTK file.
+
+    Every count a file declares is checked against what is left of the file before
+    anything is allocated or looped over (a 223-byte file declaring 500 million cells
+    once allocated 3.7 GiB and spun in a loop that never advanced).
+    """
 
     def __init__(self, raw: bytes, binary: bool, name: str) -> None:
         self.raw, self.pos, self.binary, self.name = raw, 0, binary, name
@@ -624,24 +651,74 @@ class _Cursor:
         self.pos = pos
         return t
 
-    def values(self, n: int, dtype: str) -> NDArray[Any]:
+    def fail(self, what: str, problem: str) -> ValueError:
+        return ValueError(f"{self.name!r}: {what}: {problem}")
+
+    def count(self, what: str, *, minimum: int = 0, default: int | None = None) -> int:
+        """The next token as a count: an integer >= ``minimum``, else an error naming ``what``."""
+        t = self.token()
+        if t is None and default is not None:
+            return default
+        try:
+            n = int(t) if t is not None else None
+        except ValueError:
+            n = None
+        if n is None or n < minimum:
+            raise self.fail(what, f"expected an integer >= {minimum}, got {t!r}" if t else "the file ends here")
+        return n
+
+    def dtype(self, what: str) -> str:
+        t = (self.token() or "").lower()
+        if t not in _VTK_DTYPES:
+            raise self.fail(what, f"data type {t!r} is not one of {sorted(_VTK_DTYPES)}")
+        return _VTK_DTYPES[t]
+
+    def values(self, n: int, dtype: str, what: str) -> NDArray[Any]:
         dt = np.dtype(dtype)
         if self.binary:
             nl = self.raw.find(b"\n", self.pos)  # binary data start after the keyword's line
             self.pos = nl + 1 if nl >= 0 else self.pos
             nbytes = n * dt.itemsize
             if self.pos + nbytes > len(self.raw):
-                raise ValueError(f"{self.name!r} ends inside binary data ({nbytes} bytes expected)")
+                raise self.fail(what, f"{n} values of {nbytes} bytes are declared, but the file ends "
+                                      f"{len(self.raw) - self.pos} bytes later")
             out = np.frombuffer(self.raw, dt.newbyteorder(">"), count=n, offset=self.pos).astype(dt)
             self.pos += nbytes
             return out
         if n == 0:
             return np.zeros(0, dt)
+        # Each ascii value takes at least one byte: refuse a count the rest cannot hold
+        # before splitting anything.
+        if n > len(self.raw) - self.pos:
+            raise self.fail(what, f"{n} values are declared, but only {len(self.raw) - self.pos} bytes are left")
         parts = self.raw[self.pos:].split(maxsplit=n)
         if len(parts) < n:
-            raise ValueError(f"{self.name!r} ends after {len(parts)} of {n} values")
+            raise self.fail(what, f"the file ends after {len(parts)} of {n} values")
         self.pos = len(self.raw) - (len(parts[n]) if len(parts) > n else 0)
-        return np.array(parts[:n], dtype=np.float64 if dt.kind == "f" else np.int64).astype(dt)
+        if dt.kind == "f":
+            try:
+                return np.array(parts[:n], dtype=np.float64).astype(dt)
+            except ValueError:
+                bad = next(p for p in parts[:n] if not _is_number(p, float))
+                raise self.fail(what, f"{bad.decode('latin-1')!r} is not a number") from None
+        try:
+            ints = np.array(parts[:n], dtype=np.int64)
+        except (ValueError, OverflowError):
+            bad = next(p for p in parts[:n] if not _is_number(p, int))
+            raise self.fail(what, f"{bad.decode('latin-1')!r} is not an integer of {dt.name}") from None
+        info = np.iinfo(dt)
+        if ints.min() < info.min or ints.max() > info.max:  # the cast would wrap silently
+            bad_i = ints.min() if ints.min() < info.min else ints.max()
+            raise self.fail(what, f"value {bad_i} does not fit its declared type {dt.name}")
+        return ints.astype(dt)
+
+
+def _is_number(token: bytes, kind: type) -> bool:
+    try:
+        v = kind(token)
+        return kind is float or -2**63 <= v < 2**63
+    except ValueError:
+        return False
 
 
 def read_legacy_vtk(path: str | os.PathLike[str]) -> tuple[
@@ -653,6 +730,9 @@ def read_legacy_vtk(path: str | os.PathLike[str]) -> tuple[
     of consecutive cells of one type, ``(type name, (k, nodes) array)``, or a list of
     arrays for cells of varying size (polygons, strips); cell fields are lists with one
     array per block. SCALARS, VECTORS, NORMALS, TENSORS and FIELD arrays are read.
+    Counts are checked against what the file holds before anything is allocated, and a
+    field whose length is not the POINT_DATA/CELL_DATA count, or a count that is not the
+    number of points/cells, is an error naming it.
     """
     name = os.fspath(path)
     with open(name, "rb") as f:
@@ -673,6 +753,7 @@ def read_legacy_vtk(path: str | os.PathLike[str]) -> tuple[
     types: Int | None = None
     point_data: dict[str, NDArray[Any]] = {}
     cell_flat: dict[str, NDArray[Any]] = {}
+    counts: dict[str, int] = {}
     section, count = "", 0
     while (t := cur.token()) is not None:
         key = t.upper()
@@ -681,68 +762,65 @@ def read_legacy_vtk(path: str | os.PathLike[str]) -> tuple[
             if kind != "UNSTRUCTURED_GRID":
                 raise ValueError(f"{name!r} holds a {kind} dataset, not an UNSTRUCTURED_GRID")
         elif key == "POINTS":
-            n = int(cur.token() or 0)
-            dt = _VTK_DTYPES[(cur.token() or "").lower()]
-            points = cur.values(3 * n, dt).astype(np.float64).reshape(n, 3)
+            n = cur.count("POINTS count")
+            dt = cur.dtype("POINTS")
+            points = cur.values(3 * n, dt, f"POINTS {n}").astype(np.float64).reshape(n, 3)
         elif key == "CELLS":
-            a, b = int(cur.token() or 0), int(cur.token() or 0)
+            a, b = cur.count("CELLS count"), cur.count("CELLS size")
             if (cur.peek() or "").upper() == "OFFSETS":  # VTK 5.1: offsets and connectivity arrays
                 cur.token()
-                offsets = cur.values(a, _VTK_DTYPES[(cur.token() or "").lower()]).astype(np.int64)
+                offsets = cur.values(a, cur.dtype("OFFSETS"), f"OFFSETS of CELLS {a} {b}").astype(np.int64)
                 if (cur.token() or "").upper() != "CONNECTIVITY":
                     raise ValueError(f"{name!r}: OFFSETS must be followed by CONNECTIVITY")
-                conn = cur.values(b, _VTK_DTYPES[(cur.token() or "").lower()]).astype(np.int64)
+                conn = cur.values(b, cur.dtype("CONNECTIVITY"), f"CONNECTIVITY of CELLS {a} {b}").astype(np.int64)
+                if a == 0 or offsets[0] != 0 or offsets[-1] != b or np.any(np.diff(offsets) < 0):
+                    raise ValueError(f"{name!r}: CELLS {a} {b}: OFFSETS must rise from 0 to {b} (the CONNECTIVITY "
+                                     f"size), got {offsets[:3].tolist()} ... {offsets[-3:].tolist()}")
             else:  # classic: per cell, its node count then its nodes
-                flat = cur.values(b, "i4").astype(np.int64)
-                k = int(flat[0]) if b else 0
-                if a and b == a * (k + 1) and np.all(flat[:: k + 1] == k):  # one cell size: no walk
-                    heads = np.arange(0, b, k + 1)
-                else:  # each count says where the next cell starts
-                    heads = np.zeros(a, np.int64)
-                    pos = 0
-                    for i in range(a):
-                        heads[i] = pos
-                        pos += int(flat[pos]) + 1
-                offsets = np.r_[0, np.cumsum(flat[heads])]
-                keep = np.ones(flat.shape[0], dtype=bool)
-                keep[heads] = False
-                conn = flat[keep]
+                offsets, conn = _classic_cells(cur, a, b)
         elif key == "CELL_TYPES":
-            n = int(cur.token() or 0)
-            types = cur.values(n, "i4").astype(np.int64)
+            n = cur.count("CELL_TYPES count")
+            types = cur.values(n, "i4", f"CELL_TYPES {n}").astype(np.int64)
         elif key in ("POINT_DATA", "CELL_DATA"):
-            section, count = key, int(cur.token() or 0)
+            section, count = key, cur.count(f"{key} count")
+            counts[key] = count
         elif key in ("SCALARS", "VECTORS", "NORMALS", "TENSORS", "TEXTURE_COORDINATES", "COLOR_SCALARS"):
             aname = cur.token() or ""
+            what = f"{key} {aname!r}"
             if key == "COLOR_SCALARS":
-                ncomp, dt = int(cur.token() or 1), ("u1" if cur.binary else "f4")
+                ncomp, dt = cur.count(f"{what} components", minimum=1, default=1), ("u1" if cur.binary else "f4")
             else:
-                dt = _VTK_DTYPES[(cur.token() or "").lower()]
+                dt = cur.dtype(what)
                 ncomp = {"VECTORS": 3, "NORMALS": 3, "TENSORS": 9}.get(key, 1)
                 if key == "SCALARS":
                     rest = cur.line().split()
-                    ncomp = int(rest[0]) if rest else 1
+                    ncomp = int(rest[0]) if rest and rest[0].isdigit() else 0 if rest else 1
+                    if not 1 <= ncomp <= 4:
+                        raise cur.fail(what, f"a SCALARS array has 1 to 4 components, got {rest[0]!r}")
                     if (cur.peek() or "").upper() == "LOOKUP_TABLE":
                         cur.token()
                         cur.token()
                 elif key == "TEXTURE_COORDINATES":
-                    ncomp = int(cur.token() or 1)
-            vals = cur.values(count * ncomp, dt)
+                    ncomp = cur.count(f"{what} components", minimum=1)
+            vals = cur.values(count * ncomp, dt, f"{what} in {section or 'no data section'} {count}")
             _store(point_data if section == "POINT_DATA" else cell_flat, aname, vals, count, ncomp)
         elif key == "LOOKUP_TABLE":
             cur.token()
-            n = int(cur.token() or 0)
-            cur.values(4 * n, "u1" if cur.binary else "f4")
+            n = cur.count("LOOKUP_TABLE size")
+            cur.values(4 * n, "u1" if cur.binary else "f4", f"LOOKUP_TABLE {n}")
         elif key == "FIELD":
             cur.token()
-            for _ in range(int(cur.token() or 0)):
+            for _ in range(cur.count("FIELD array count")):  # each array consumes tokens: bounded by the file
                 aname = cur.token() or ""
-                ncomp, ntup = int(cur.token() or 1), int(cur.token() or 0)
-                vals = cur.values(ncomp * ntup, _VTK_DTYPES[(cur.token() or "").lower()])
+                what = f"FIELD array {aname!r}"
+                ncomp, ntup = cur.count(f"{what} components", minimum=1), cur.count(f"{what} tuples")
+                vals = cur.values(ncomp * ntup, cur.dtype(what), what)
                 if (cur.peek() or "").upper() == "METADATA":
                     _skip_metadata(cur)
                 target = point_data if section == "POINT_DATA" else cell_flat if section == "CELL_DATA" else None
                 if target is not None:
+                    if ntup != count:
+                        raise cur.fail(what, f"{ntup} tuples in {section} {count}")
                     _store(target, aname, vals, ntup, ncomp)
         elif key == "METADATA":
             cur.pos -= len(t)
@@ -753,6 +831,10 @@ def read_legacy_vtk(path: str | os.PathLike[str]) -> tuple[
         raise ValueError(f"{name!r} lacks POINTS, CELLS or CELL_TYPES")
     if types.shape[0] != offsets.shape[0] - 1:
         raise ValueError(f"{name!r}: {types.shape[0]} CELL_TYPES for {offsets.shape[0] - 1} CELLS")
+    for key, want in (("POINT_DATA", points.shape[0]), ("CELL_DATA", types.shape[0])):
+        if key in counts and counts[key] != want:
+            what = "points" if key == "POINT_DATA" else "cells"
+            raise ValueError(f"{name!r}: {key} {counts[key]} does not match the {want} {what} of the grid")
     blocks: list[tuple[str, Any]] = []
     run_starts = np.r_[0, np.nonzero(np.diff(types))[0] + 1, types.shape[0]]
     for s, e in itertools.pairwise(run_starts):
@@ -764,6 +846,33 @@ def read_legacy_vtk(path: str | os.PathLike[str]) -> tuple[
             blocks.append((ctype, [conn[offsets[i]:offsets[i + 1]] for i in range(s, e)]))
     cell_data = {k: [v[s:e] for s, e in itertools.pairwise(run_starts)] for k, v in cell_flat.items()}
     return points, blocks, point_data, cell_data
+
+
+def _classic_cells(cur: _Cursor, a: int, b: int) -> tuple[Int, Int]:
+    """Offsets and connectivity of classic ``CELLS a b``: per cell, its node count, then its nodes."""
+    if a > b:
+        raise cur.fail(f"CELLS {a} {b}", f"{a} cells cannot fit in {b} values (each takes at least its node count)")
+    flat = cur.values(b, "i4", f"CELLS {a} {b}").astype(np.int64)
+    k = int(flat[0]) if b else 0
+    if a and k >= 0 and b == a * (k + 1) and np.all(flat[:: k + 1] == k):  # one cell size: no walk
+        heads = np.arange(0, b, k + 1)
+    else:  # each count says where the next cell starts; every step advances by at least one
+        heads = np.empty(a, np.int64)
+        pos = 0
+        for i in range(a):
+            size = int(flat[pos]) if pos < b else -1
+            if size < 0 or pos + 1 + size > b:
+                problem = (f"the {b} values end after {i} of {a} cells" if pos >= b else
+                           f"cell {i} declares {size} nodes" + ("" if size < 0 else f", past the {b} values"))
+                raise cur.fail(f"CELLS {a} {b}", problem)
+            heads[i] = pos
+            pos += size + 1
+        if pos != b:
+            raise cur.fail(f"CELLS {a} {b}", f"the {a} cells take {pos} of the {b} values declared")
+    offsets = np.r_[0, np.cumsum(flat[heads])]
+    keep = np.ones(flat.shape[0], dtype=bool)
+    keep[heads] = False
+    return offsets, flat[keep]
 
 
 def _store(target: dict[str, NDArray[Any]], name: str, vals: NDArray[Any], n: int, ncomp: int) -> None:

@@ -1,16 +1,23 @@
-"""Images out: premultiplied float RGBA -> PNG, with no imaging dependency."""
+"""Images out: premultiplied float RGBA -> PNG, with no imaging dependency; files
+written atomically; the memory an image of a given size may take."""
 
 from __future__ import annotations
 
+import contextlib
 import os
+import secrets
 import struct
 import zlib
-from typing import Any, Sequence
+from typing import IO, Any, Iterator, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["image_size", "write_png", "png_bytes", "to_rgba8", "composite_over", "psnr", "rmse"]
+__all__ = ["image_size", "write_png", "png_bytes", "to_rgba8", "composite_over", "psnr", "rmse",
+           "atomic_output", "available_memory", "check_memory"]
+
+#: Rows of a PNG converted at once: bounds the float64 temporaries of a large image.
+_PNG_BLOCK_BYTES = 64 << 20
 
 
 def image_size(size: Any) -> tuple[int, int]:
@@ -59,26 +66,124 @@ def write_png(image: ArrayLike, path: str | os.PathLike[str], *, background: Seq
     """Write a premultiplied float RGBA image (row 0 at the top) as an 8-bit PNG.
 
     ``background`` is composited under the image; ``None`` writes a translucent RGBA PNG.
+    The file is written atomically (:func:`atomic_output`): a failure leaves any earlier
+    file of that name as it was.
     """
-    data = png_bytes(image, background=background)  # first: a rejected image leaves no empty file
-    with open(path, "wb") as f:
+    data = png_bytes(image, background=background)  # first: a rejected image leaves no file
+    with atomic_output(path) as f:
         f.write(data)
 
 
 def png_bytes(image: ArrayLike, background: Sequence[float] | None = (1.0, 1.0, 1.0), *, level: int = 6) -> bytes:
     """The PNG file of a premultiplied float RGBA image, as bytes (see :func:`write_png`)."""
-    rgba = to_rgba8(image, background)
-    h, w, _ = rgba.shape
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] != 4:
+        raise ValueError(f"image must have shape (H, W, 4), got {img.shape}")
+    h, w, _ = img.shape
     if h < 1 or w < 1:
-        raise ValueError(f"a PNG needs at least one pixel, got an image of shape {rgba.shape}")
-    raw = b"".join(b"\x00" + rgba[i].tobytes() for i in range(h))
+        raise ValueError(f"a PNG needs at least one pixel, got an image of shape {img.shape}")
+    # Converted a block of rows at a time: to_rgba8 holds ~200 bytes of float64 per pixel,
+    # 50 GiB for a 16384 x 16384 image taken whole.
+    rows = max(1, _PNG_BLOCK_BYTES // (w * 200))
+    deflate = zlib.compressobj(level)
+    idat = []
+    for r0 in range(0, h, rows):
+        rgba = to_rgba8(img[r0:r0 + rows], background)
+        raw = np.zeros((rgba.shape[0], 1 + 4 * w), dtype=np.uint8)  # column 0: filter type 0 per row
+        raw[:, 1:] = rgba.reshape(rgba.shape[0], 4 * w)
+        idat.append(deflate.compress(raw.tobytes()))
+    idat.append(deflate.flush())
 
     def chunk(tag: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
 
     png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0))
-    png += chunk(b"IDAT", zlib.compress(raw, level)) + chunk(b"IEND", b"")
+    png += chunk(b"IDAT", b"".join(idat)) + chunk(b"IEND", b"")
     return png
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
+    """A binary file to write ``path`` through, atomically: the bytes go to a temporary
+    file in the same folder, which replaces ``path`` (``os.replace``) only when the block
+    ends without an error; on an error it is removed and ``path`` is left as it was.
+
+    Readers never see a half-written file, and a file that is also an input of the
+    command (a hard link, say) is replaced, not written through.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> out = pathlib.Path(tempfile.mkdtemp()) / "x.bin"
+    >>> with atomic_output(out) as f:
+    ...     _ = f.write(b"data")
+    >>> out.read_bytes()
+    b'data'
+    """
+    target = os.fspath(path)
+    if isinstance(target, bytes):
+        target = os.fsdecode(target)
+    folder, name = os.path.split(target)
+    folder = folder or "."
+    if not name or os.path.isdir(target):
+        raise IsADirectoryError(f"cannot write {target!r}: it is a directory, not a file name")
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(f"cannot write {target!r}: the folder {folder!r} does not exist")
+    while True:
+        tmp = os.path.join(folder, f".{name[:200]}.{secrets.token_hex(6)}.tmp")
+        try:
+            # 0o666 less the umask, as open() would make it (mkstemp's 0o600 would not).
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+            break
+        except FileExistsError:  # pragma: no cover - 48 random bits
+            continue
+    try:
+        with os.fdopen(fd, "wb") as f:
+            yield f
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def available_memory() -> int | None:
+    """Bytes of memory this process may still take without swapping or being killed, as
+    far as the system tells (Linux: ``MemAvailable``, within a cgroup's limit), or None."""
+    found: list[int] = []
+    with contextlib.suppress(OSError, ValueError, IndexError):
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    found.append(int(line.split()[1]) * 1024)
+                    break
+    # A container's own limit (cgroup v2, then v1) is often far below the machine's.
+    for limit_file, usage_file in (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
+                                   ("/sys/fs/cgroup/memory/memory.limit_in_bytes",
+                                    "/sys/fs/cgroup/memory/memory.usage_in_bytes")):
+        with contextlib.suppress(OSError, ValueError):
+            with open(limit_file) as f:
+                limit = f.read().strip()
+            if limit != "max" and int(limit) < 1 << 60:
+                with open(usage_file) as f:
+                    found.append(max(int(limit) - int(f.read().strip()), 0))
+            break
+    if not found:
+        with contextlib.suppress(AttributeError, ValueError, OSError):
+            found.append(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    return min(found) if found else None
+
+
+def check_memory(need: int, what: str) -> None:
+    """Raise ``MemoryError`` naming ``what`` and the sizes if ``need`` bytes are more than
+    :func:`available_memory` (nothing is checked where the system does not say)."""
+    have = available_memory()
+    if have is not None and need > have:
+        raise MemoryError(f"{what} needs about {_gib(need)} of memory; {_gib(have)} is available")
+
+
+def _gib(n: float) -> str:
+    return f"{n / 2**30:.3g} GiB" if n >= 2**30 else f"{n / 2**20:.3g} MiB"
 
 
 def rmse(a: ArrayLike, b: ArrayLike) -> float:

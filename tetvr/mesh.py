@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import io
+import math
 import os
 import warnings
 from functools import cached_property
@@ -19,6 +20,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from ._checks import check_input_file
 
 __all__ = ["TetMesh", "read", "MeshReport"]
 
@@ -93,17 +96,24 @@ class TetMesh:
         except ValueError as exc:  # ragged nested sequences
             raise ValueError(f"tets must be a rectangular integer array: {exc}") from None
         if t.dtype.kind not in "iu":
-            if t.dtype.kind == "f" and t.size and np.all(t == np.round(t)):
-                t = t.astype(np.int64)
-            else:
+            if not (t.dtype.kind == "f" and t.size):
                 raise TypeError(f"tets must be an integer array, got dtype {t.dtype}")
+            # Checked before any cast: inf or 1e20 cast to int64 become -2**63, a bogus id.
+            with np.errstate(invalid="ignore"):
+                wrong = ~np.isfinite(t) | (t != np.round(t))
+            if np.any(wrong):
+                at = tuple(np.argwhere(wrong)[0])
+                raise TypeError(f"tets must be an integer array, got dtype {t.dtype} holding {t[at]} "
+                                f"(tet {at[0] if at else 0}: {np.atleast_1d(t[at[:1]]).tolist()})")
         if t.ndim != 2 or t.shape[1] != 4:
             raise ValueError(f"tets must have shape (m, 4), got {t.shape}")
         if t.shape[0] == 0:
             raise ValueError("the mesh has no tetrahedra")
         if t.min() < 0 or t.max() >= pts.shape[0]:
-            bad = int(t.min()) if t.min() < 0 else int(t.max())
-            raise ValueError(f"tets index point {bad}, outside 0..{pts.shape[0] - 1}")
+            bad = t.min() if t.min() < 0 else t.max()
+            shown = f"{bad:g}" if t.dtype.kind == "f" and abs(bad) >= 2**53 else int(bad)
+            raise ValueError(f"tets index point {shown}, outside 0..{pts.shape[0] - 1}")
+        t = t.astype(np.int64)
         s = _as_float_array(scalars, "scalars")
         if s.ndim != 1 or s.shape[0] != pts.shape[0]:
             raise ValueError(f"scalars must have one value per point ({pts.shape[0]}), got shape {s.shape}")
@@ -247,11 +257,9 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
     --------
     >>> mesh = read(demo_mesh_path(), "Pressure")  # doctest: +SKIP
     """
-    path = os.fspath(path)
-    if not os.path.exists(path):
-        raise FileNotFoundError(f"mesh file not found: {path}")
-    if os.path.isdir(path):
-        raise ValueError(f"cannot read mesh file {path!r}: it is a directory")
+    # Not found, a directory, a FIFO (never opened: it would block), a symbolic link
+    # loop, a name too long: each reported as what it is.
+    path = check_input_file(path, "mesh file")
     if os.path.getsize(path) == 0:
         raise ValueError(f"cannot read mesh file {path!r}: the file is empty")
     if scalars is not None and not isinstance(scalars, str):
@@ -349,6 +357,120 @@ def _tetgen_has_header(path: str) -> None:
                 raise EOFError(f"{name!r} has no header line")
 
 
+# Exodus II files are netCDF. The netCDF library returns fill values for data that lie
+# past the end of a short file, so a 4 KB header declaring 3e8 nodes made meshio fill
+# gigabytes (minutes, then MemoryError): the data a header declares must fit in the file.
+_NC_TYPE_BYTES = {1: 1, 2: 1, 3: 2, 4: 4, 5: 4, 6: 8, 7: 1, 8: 2, 9: 4, 10: 8, 11: 8}
+# deflate never compresses more than ~1032:1; HDF5 variables compressed by it cannot hold more.
+_DEFLATE_MAX_RATIO = 1032
+
+
+def _netcdf_fits_file(path: str) -> None:
+    """Refuse a netCDF (classic or HDF5-based) file whose variables need more bytes than it can hold."""
+    size = os.path.getsize(path)
+    with open(path, "rb") as f:
+        magic = f.read(8)
+    if magic[:3] == b"CDF":
+        declared, largest, dims = _netcdf_classic_sizes(path, size)
+        limit, how = size, ""
+    elif magic == b"\x89HDF\r\n\x1a\n":
+        try:
+            import netCDF4
+        except ImportError:
+            return  # meshio cannot read it either, and says so
+        declared, largest, compressed = 0, (0, ""), False
+        with netCDF4.Dataset(path) as nc:
+            dims = {name: len(d) for name, d in nc.dimensions.items()}
+            for name, var in nc.variables.items():
+                itemsize = getattr(var.dtype, "itemsize", 8)  # variable-length strings: a pointer each
+                n = math.prod(int(d) for d in var.shape) * itemsize
+                declared += n
+                if n > largest[0]:
+                    largest = (n, f"variable {name!r} of shape {tuple(var.shape)}")
+                compressed |= bool((var.filters() or {}).get("zlib"))
+        limit, how = (size * _DEFLATE_MAX_RATIO, " (deflate-compressed)") if compressed else (size, "")
+    else:
+        return
+    # meshio allocates (num_nodes, 3) float64 points from the dimension alone; a file's
+    # coordinates take at least num_nodes * num_dim float32s.
+    nodes = dims.get("num_nodes", 0) * max(dims.get("num_dim", 1), 1) * 4
+    if nodes > declared:
+        declared, largest = nodes, (nodes, f"dimension num_nodes = {dims['num_nodes']}")
+    if declared > limit:
+        raise ValueError(f"the netCDF header declares {declared} bytes of data ({largest[1]}), but the file"
+                         f"{how} holds {size} bytes; it is truncated or its dimensions are corrupt")
+
+
+def _netcdf_classic_sizes(path: str, size: int) -> tuple[int, tuple[int, str], dict[str, int]]:
+    """Bytes of data a netCDF classic header (CDF-1, -2 or -5) declares, its largest
+    variable, and its dimensions by name.
+
+    Parsed here (the format is a few lines of spec) so that no netCDF library is needed
+    to refuse a file; every count is bounded by the bytes left before it is looped over.
+    """
+    with open(path, "rb") as f:
+        def take(n: int) -> bytes:
+            if n < 0 or f.tell() + n > size:
+                raise ValueError(f"the netCDF header is truncated at byte {f.tell()} ({n} more bytes declared)")
+            return f.read(n)
+
+        version = take(4)[3]
+        if version not in (1, 2, 5):
+            raise ValueError(f"unknown netCDF classic version {version}")
+        width = 8 if version == 5 else 4
+
+        def num(w: int = width) -> int:
+            return int.from_bytes(take(w), "big")
+
+        def skip_name() -> str:
+            n = num()
+            return take(n + (-n % 4))[:n].decode("utf-8", "replace")
+
+        def count(tag: int, what: str) -> int:
+            got, n = num(4), num()
+            if got == 0 and n == 0:
+                return 0
+            if got != tag or 4 * n > size - f.tell():
+                raise ValueError(f"the netCDF header's {what} list is corrupt (tag {got}, {n} entries)")
+            return n
+
+        def skip_attributes() -> None:
+            for _ in range(count(0x0C, "attribute")):
+                skip_name()
+                nc_type, n = num(4), num()
+                nbytes = n * _NC_TYPE_BYTES.get(nc_type, 0)
+                if nc_type not in _NC_TYPE_BYTES:
+                    raise ValueError(f"the netCDF header has an attribute of unknown type {nc_type}")
+                take(nbytes + (-nbytes % 4))
+
+        numrecs = num()
+        numrecs = 0 if numrecs == (1 << 8 * width) - 1 else numrecs  # STREAMING: length unknown
+        dims, names = [], []
+        for _ in range(count(0x0A, "dimension")):
+            names.append(skip_name())
+            dims.append(num())
+        skip_attributes()
+        total, largest = 0, (0, "")
+        for _ in range(count(0x0B, "variable")):
+            name = skip_name()
+            ndim = num()
+            if 4 * ndim > size - f.tell():
+                raise ValueError(f"the netCDF variable {name!r} declares {ndim} dimensions")
+            ids = [num() for _ in range(ndim)]
+            skip_attributes()
+            nc_type = num(4)
+            num()  # vsize: clipped to 2**32 - 1 in CDF-1/2, so recomputed from the dimensions
+            num(4 if version == 1 else 8)  # begin
+            if nc_type not in _NC_TYPE_BYTES or any(i >= len(dims) for i in ids):
+                raise ValueError(f"the netCDF variable {name!r} has unknown type {nc_type} or dimension ids {ids}")
+            shape = tuple(dims[i] or numrecs for i in ids)
+            n = math.prod(shape) * _NC_TYPE_BYTES[nc_type]
+            total += n
+            if n > largest[0]:
+                largest = (n, f"variable {name!r} of shape {shape}")
+    return total, largest, dict(zip(names, dims))
+
+
 def _meshio_read(path: str) -> Any:
     """``meshio.read`` made safe for corrupt files: any failure is a ValueError naming the file.
 
@@ -365,6 +487,8 @@ def _meshio_read(path: str) -> Any:
             with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
                 if fmt == "tetgen":
                     _tetgen_has_header(path)
+                if fmt == "exodus":
+                    _netcdf_fits_file(path)
                 if fmt in _LOOPS_AT_EOF:
                     raw = io.FileIO(path, "r")
                     f: Any = _GuardedBytes(raw) if _LOOPS_AT_EOF[fmt] == "rb" else _GuardedText(io.BufferedReader(raw))

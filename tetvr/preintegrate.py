@@ -48,15 +48,80 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .image import check_memory
 from .optics import MAX_OPACITY, OPTICS, mean_neg_log
 from .transfer import TransferFunction
 
-__all__ = ["PreintegrationTable", "build_table", "table_for", "table_scalar_range", "aligned_scalar_range", "fewest_spacings"]
+__all__ = ["PreintegrationTable", "build_table", "table_for", "table_scalar_range", "aligned_scalar_range",
+           "fewest_spacings", "table_build_bytes", "check_table_size", "check_unit_distance",
+           "MAX_TABLE_BUILD_BYTES", "MAX_THICKNESS_SPAN", "MIN_UNIT_DISTANCE"]
 
 # Largest extinction (per world unit) stored in a "normalized" table. A tiny unit distance
 # gives extinctions past float32's range: stored as inf, the shader's d * inf at d = 0 is
 # NaN. Capped, any segment longer than ~1e-28 is still opaque, which is what inf meant.
 _MAX_STORED_TAU = 1e30
+
+#: Peak bytes :func:`build_table` holds per table entry (N * N * (K + 1)): the float64
+#: working arrays of the run recurrence and of the encoding. Measured with tracemalloc at
+#: 128-512 bins and 8-32 slices: 107-127 bytes.
+TABLE_BUILD_BYTES_PER_ENTRY = 128
+#: The largest table build allowed, whatever memory the machine has: 8 GiB, ~67M entries
+#: (1024 x 1024 x 64; the benchmark sweep's largest, 1024 x 1024 x 49, takes 6.1 GiB and
+#: ~5 s), whose float32 texture is 1 GiB. 2048 bins x 256 slices would need 138 GiB.
+MAX_TABLE_BUILD_BYTES = 8 << 30
+#: The largest ratio d_max / d_min = log_base ** (K - 1) of a thickness axis. The GPU
+#: takes 1 / d_min in float32 (``u_slices``): with the thinnest mesh it accepts
+#: (extent 1e-13, ``tetvr.render.GPU_EXTENT_RANGE``) that is 1e37, below float32's 3.4e38.
+#: Beyond ~1e308 d_min itself underflows to 0. The "auto" axis spans at most 1e6.
+MAX_THICKNESS_SPAN = 1e24
+#: The smallest transfer-function unit distance: extinction ``-ln(1 - a) / u`` reaches
+#: 13.8 / u (opacity capped at 1 - 1e-6), and the table's prefix sums add up to 4096 bins
+#: of it; from 1e-300 that stays below float64's 1.8e308 (a subnormal u made it inf, and
+#: inf * 0 NaN images and table sizes).
+MIN_UNIT_DISTANCE = 1e-300
+
+
+def table_build_bytes(n_bins: int, n_slices: int) -> int:
+    """Peak memory of :func:`build_table` for ``n_bins`` x ``n_bins`` x ``n_slices + 1``
+    entries, in bytes (an upper bound of what was measured).
+
+    >>> table_build_bytes(256, 16) / 2**20
+    136.0
+    """
+    return TABLE_BUILD_BYTES_PER_ENTRY * int(n_bins) ** 2 * (int(n_slices) + 1)
+
+
+def check_table_size(n_bins: int, n_slices: int, log_base: float | None = None, *,
+                     names: tuple[str, str, str] = ("n_bins", "n_slices", "log_base")) -> None:
+    """Refuse a table too big to build (:data:`MAX_TABLE_BUILD_BYTES`) or whose
+    thickness axis spans more than :data:`MAX_THICKNESS_SPAN`, with a ``ValueError`` naming
+    the sizes (``names``: how the caller calls the three arguments)."""
+    need = table_build_bytes(n_bins, n_slices)
+    if need > MAX_TABLE_BUILD_BYTES:
+        raise ValueError(
+            f"{names[0]}={n_bins} with {names[1]}={n_slices} is a {n_bins} x {n_bins} x {n_slices + 1} table "
+            f"({n_bins * n_bins * (n_slices + 1):,} entries) whose build needs {need / 2**30:.3g} GiB, more than "
+            f"the {MAX_TABLE_BUILD_BYTES / 2**30:g} GiB allowed; use fewer bins or slices")
+    if log_base is not None and n_slices > 1:
+        # In logarithms: log_base ** (K - 1) itself may overflow.
+        exponent = (n_slices - 1) * math.log10(float(log_base))
+        if exponent > math.log10(MAX_THICKNESS_SPAN):
+            raise ValueError(
+                f"{names[2]}={log_base!r} with {names[1]}={n_slices}: the thickness axis would span "
+                f"{names[2]} ** ({names[1]} - 1) = 1e{exponent:.0f} (thickest over thinnest slice), more than "
+                f"{MAX_THICKNESS_SPAN:g}; use a smaller {names[2]} or fewer slices")
+
+
+def check_unit_distance(unit_distance: float, name: str = "unit_distance") -> float:
+    """``unit_distance`` as a float if the optics can use it: positive, finite and at
+    least :data:`MIN_UNIT_DISTANCE`, else ``ValueError`` naming the value."""
+    u = float(unit_distance)
+    if not (math.isfinite(u) and u >= MIN_UNIT_DISTANCE):
+        raise ValueError(
+            f"{name} must be a finite number of at least {MIN_UNIT_DISTANCE:g} (world units), got {unit_distance!r}: "
+            "below, the extinction -ln(1 - opacity) / unit_distance overflows float64; scale the mesh and the "
+            "unit distance up together")
+    return u
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -322,14 +387,20 @@ def build_table(
         raise ValueError(f"scalar_range must be finite with lo < hi, got {scalar_range!r}")
     if not (math.isfinite(d_max) and d_max > 0):
         raise ValueError(f"d_max must be positive and finite, got {d_max!r}")
-    if n_bins < 2 or n_slices < 1:
-        raise ValueError(f"need n_bins >= 2 and n_slices >= 1, got {n_bins}, {n_slices}")
+    for name, v, least in (("n_bins", n_bins, 2), ("n_slices", n_slices, 1)):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < least:
+            raise ValueError(f"{name} must be an integer of at least {least}, got {v!r}")
+    n_bins, n_slices = int(n_bins), int(n_slices)
+    if not (math.isfinite(float(log_base)) and float(log_base) > 1.0):
+        raise ValueError(f"log_base must be a finite number above 1, got {log_base!r}")
     if encoding not in ("normalized", "premultiplied"):
         raise ValueError(f"encoding must be 'normalized' or 'premultiplied', got {encoding!r}")
     if dtype not in ("float32", "uint8"):
         raise ValueError(f"dtype must be 'float32' or 'uint8', got {dtype!r}")
-
-    u = tf.unit_distance
+    check_table_size(n_bins, n_slices, log_base)
+    u = check_unit_distance(tf.unit_distance, "the transfer function's unit_distance")
+    check_memory(table_build_bytes(n_bins, n_slices),
+                 f"building a {n_bins} x {n_bins} x {n_slices + 1} pre-integration table")
     nodes = np.linspace(lo, hi, n_bins)
     color, opacity = tf.evaluate(nodes)
     if optics not in OPTICS:
@@ -342,6 +413,10 @@ def build_table(
         tau_node = np.clip(opacity, 0.0, 1.0) / u
         tau_bin = 0.5 * (tau_node[:-1] + tau_node[1:])
     thick = d_max * log_base ** (np.arange(n_slices) - n_slices + 1.0)
+    if not thick[0] >= np.finfo(np.float64).tiny:  # lookups divide by it
+        raise ValueError(f"the thinnest slice, d_max * log_base ** -(n_slices - 1) = {float(thick[0])!r}, underflows "
+                         f"(d_max={d_max!r}, log_base={log_base!r}, n_slices={n_slices}); use fewer slices or a "
+                         "smaller log_base, or scale the mesh up")
 
     # Built as [k, sf, sb] (each step of the run recurrence writes one contiguous row) and
     # stored as [k, sb, sf]; theta and alpha are symmetric in (sf, sb).

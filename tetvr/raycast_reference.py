@@ -41,7 +41,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._checks import check_instances
 from .camera import Camera
-from .image import image_size
+from .image import check_memory, image_size
+from .preintegrate import check_table_size, check_unit_distance
 from .reference import composite, integrate_segments
 from .transfer import TransferFunction
 from .volume import Volume
@@ -64,6 +65,10 @@ INTERPOLATIONS = ("linear", "cubic")
 
 #: Bisection steps that refine an isosurface hit inside the step that brackets it.
 ISO_REFINE_STEPS = 8
+#: Bytes per pixel :func:`render_volume_reference` holds whatever the volume: the rays
+#: and their intervals in world and index space, the slab test's temporaries and the
+#: float64 and float32 images (measured: 162).
+_BYTES_PER_PIXEL = 176
 
 Float = NDArray[np.float64]
 
@@ -161,6 +166,9 @@ class RaycastSettings:
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not lo <= v <= hi:
                 raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
             object.__setattr__(self, name, int(v))
+        # The ray caster's table has log base 2 (Raycaster.table): 2 ** 63 stays within the span.
+        check_table_size(self.table_scalar_bins, self.table_thickness_slices, 2.0,
+                         names=("table_scalar_bins", "table_thickness_slices", "log_base"))
 
     def step_for(self, volume: Volume) -> float:
         """The world step used for ``volume``."""
@@ -336,8 +344,12 @@ def render_volume_reference(
     0.5
     """
     check_instances(volume=(volume, Volume), camera=(camera, Camera), tf=(tf, TransferFunction))
-    s = settings or RaycastSettings()
+    if settings is not None and not isinstance(settings, RaycastSettings):
+        raise TypeError(f"settings must be a RaycastSettings or None, got {type(settings).__name__}")
+    s = settings if settings is not None else RaycastSettings()
     width, height = image_size(size)
+    check_unit_distance(tf.unit_distance, "the transfer function's unit_distance")
+    check_memory(width * height * _BYTES_PER_PIXEL, f"a {width}x{height} volume reference image")
     fine = float(fine_step) if fine_step is not None else float(volume.spacing.min()) / 8.0
     if not (math.isfinite(fine) and fine > 0):
         raise ValueError(f"fine_step must be positive, got {fine_step!r}")

@@ -60,9 +60,10 @@ from numpy.typing import NDArray
 from ._checks import check_instances
 from .adjacency import FACE_VERTICES
 from .camera import Camera
-from .image import image_size
+from .image import check_memory, image_size
 from .mesh import TetMesh
 from .optics import _SUB_THETA, OPTICS, integrate_linear_pieces, integrate_pieces, piece_optical_depth, vtk_segments
+from .preintegrate import check_unit_distance
 from .transfer import TransferFunction
 
 __all__ = [
@@ -74,6 +75,10 @@ __all__ = [
     "ray_segments",
     "render_reference",
 ]
+
+#: Bytes per pixel :func:`render_reference` holds whatever the mesh: the rays' lengths
+#: (float64), the composited float64 RGBA, one channel's bincount and the float32 result.
+_BYTES_PER_PIXEL = 8 + 32 + 8 + 16
 
 #: Candidate (tet, pixel) pairs examined at once: ~200 bytes of temporaries each, so
 #: ~50 MB. Larger chunks are no faster (bluntfin at 256x256 on 2 cores: 2.3-3 s for
@@ -638,6 +643,9 @@ def render_reference(
         raise TypeError(f"tf must be a TransferFunction, got {type(tf).__name__}")
     if optics not in OPTICS:
         raise ValueError(f"optics must be one of {OPTICS}, got {optics!r}")
+    check_unit_distance(tf.unit_distance, "the transfer function's unit_distance")
+    # Up front, not at the first allocation: a 100000 x 100000 image needs 600 GiB.
+    check_memory(width * height * _BYTES_PER_PIXEL, f"a {width}x{height} reference image")
     rays = _EyeRays.from_camera(camera, width, height)
     norms = rays.norms()
     geo = _tet_geometry(mesh, camera, rays)

@@ -31,8 +31,9 @@ from typing import Any
 import numpy as np
 
 from .camera import Camera
-from .image import image_size
+from .image import atomic_output, image_size
 from .mesh import TetMesh, read
+from .preintegrate import check_unit_distance
 from .render import _tf_range, default_transfer_function
 from .settings import RenderSettings
 from .transfer import TransferFunction
@@ -100,9 +101,18 @@ class Scene:
             "settings": self.settings.to_dict(),
         }
 
+    def input_paths(self) -> tuple[str, ...]:
+        """The files this scene was read from besides its JSON (the mesh): what a command
+        rendering it must not write over."""
+        return (self.mesh_path,)
+
     def save(self, path: str | os.PathLike[str]) -> None:
-        with open(path, "w") as f:
-            json.dump(self.to_dict(relative_to=Path(path).resolve().parent), f, indent=2)
+        """Write the scene as JSON (atomically; never over its own mesh file)."""
+        if os.path.exists(path) and any(os.path.exists(p) and os.path.samefile(path, p) for p in self.input_paths()):
+            raise ValueError(f"refusing to write the scene over its own mesh file {os.fspath(path)!r}")
+        text = json.dumps(self.to_dict(relative_to=Path(path).resolve().parent), indent=2)
+        with atomic_output(path) as f:
+            f.write(text.encode("utf-8"))
 
 
 def load_scene(path: str | os.PathLike[str]) -> Scene:
@@ -116,6 +126,8 @@ def load_scene(path: str | os.PathLike[str]) -> Scene:
         raise ValueError(f"{path}: not valid JSON ({exc})") from exc
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path}: not valid JSON (not UTF-8 text: {exc})") from exc
+    except RecursionError:
+        raise ValueError(f"{path}: not a scene (JSON nested too deeply to read)") from None
     return Scene.from_dict(data, base_dir=Path(path).resolve().parent)
 
 
@@ -149,7 +161,9 @@ def _transfer_function(spec: dict[str, Any], mesh: TetMesh) -> TransferFunction:
     if not isinstance(spec, dict):
         raise ValueError(f"transfer_function must be an object, got {spec!r}")
     if "preset" not in spec:
-        return TransferFunction.from_dict(spec)
+        tf = TransferFunction.from_dict(spec)
+        check_unit_distance(tf.unit_distance, "transfer_function 'unit_distance'")
+        return tf
     unknown = set(spec) - {"preset", "range", "opacity", "unit_distance"}
     if unknown:
         raise ValueError(f"unknown transfer_function keys {sorted(unknown)}")
@@ -163,7 +177,9 @@ def _transfer_function(spec: dict[str, Any], mesh: TetMesh) -> TransferFunction:
     u = spec.get("unit_distance")
     if u is None:
         u = base.unit_distance
-    return TransferFunction.preset(spec["preset"], tuple(rng), opacity=spec.get("opacity", 0.5), unit_distance=u)
+    tf = TransferFunction.preset(spec["preset"], tuple(rng), opacity=spec.get("opacity", 0.5), unit_distance=u)
+    check_unit_distance(tf.unit_distance, "transfer_function 'unit_distance'")
+    return tf
 
 
 def _camera(spec: dict[str, Any], mesh: TetMesh) -> Camera:

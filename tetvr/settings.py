@@ -9,7 +9,8 @@ from typing import Any, Literal
 import numpy as np
 
 from .optics import OPTICS
-from .tablesize import DEFAULT_TOLERANCE
+from .preintegrate import check_table_size
+from .tablesize import AUTO_BINS, DEFAULT_TOLERANCE
 
 __all__ = ["RenderSettings", "SORT_METHODS", "TABLE_ENCODINGS", "TABLE_DTYPES"]
 
@@ -22,6 +23,8 @@ TABLE_DTYPES = ("float32", "uint8")
 TABLE_FILTERS = ("linear", "cubic")
 #: Storage of the compositing target.
 FRAMEBUFFERS = ("float32", "uint8")
+#: The two GPU methods (see :mod:`tetvr.method`): projected tetrahedra or tet marching.
+METHODS = ("auto", "projected", "raymarch")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,6 +79,13 @@ class RenderSettings:
         drawing (:mod:`tetvr.cull`; the image is unchanged, the count is in the stats).
     framebuffer : ``"float32"`` compositing target, or ``"uint8"`` (what 8-bit
         renderers such as VTK's do; for measuring what float compositing buys).
+    method : the GPU method: ``"projected"`` (projected tetrahedra: every cell classified,
+        sorted and rasterised), ``"raymarch"`` (tet marching: every pixel's ray walks the
+        cells it crosses, one exact segment each, in visibility order by construction; no
+        sort) or ``"auto"`` (default: the one :func:`tetvr.method.choose` expects to be
+        faster for the scene; see docs/methods.md). Both read the same table and return
+        the same premultiplied image; ``sort``, ``cull`` and ``perspective_correct`` apply
+        to projected tetrahedra only.
     optics : how transfer-function opacity becomes light (:data:`tetvr.optics.OPTICS`):
         ``"exact"`` (``tau = -ln(1 - a)/u``, the default), ``"linear"`` (``tau = a/u``, the
         convention of VTK's unstructured-grid mappers, integrated exactly) or ``"vtk"``
@@ -104,8 +114,11 @@ class RenderSettings:
     framebuffer: Literal["float32", "uint8"] = "float32"
     cull: bool = False
     optics: Literal["exact", "linear", "vtk"] = "exact"
+    method: Literal["auto", "projected", "raymarch"] = "auto"
 
     def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
         if self.sort not in SORT_METHODS:
             raise ValueError(f"sort must be one of {SORT_METHODS}, got {self.sort!r}")
         if self.table_encoding not in TABLE_ENCODINGS:
@@ -143,6 +156,13 @@ class RenderSettings:
             raise ValueError(f"table_log_base must be in (1, 100], got {self.table_log_base!r}")
         object.__setattr__(self, "table_log_base", float(self.table_log_base))
         object.__setattr__(self, "perspective_correct", bool(self.perspective_correct))
+        # Memory and arithmetic, before any frame: the build's peak memory of explicit sizes,
+        # and the span of an explicit thickness axis (base ** (K - 1) overflows past ~1e308).
+        # An "auto" axis takes sizes whose tables stay small (see tetvr.tablesize).
+        n, k = self.table_scalar_bins, self.table_thickness_slices
+        if k != "auto":
+            check_table_size(n if n != "auto" else min(AUTO_BINS), int(k), self.table_log_base,
+                             names=("table_scalar_bins", "table_thickness_slices", "table_log_base"))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

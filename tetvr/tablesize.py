@@ -68,7 +68,8 @@ from numpy.typing import NDArray
 
 from .mesh import TetMesh
 from .optics import extinction
-from .preintegrate import PreintegrationTable, aligned_scalar_range, build_table, table_scalar_range
+from .preintegrate import (PreintegrationTable, aligned_scalar_range, build_table, check_unit_distance,
+                           table_scalar_range)
 from .transfer import TransferFunction
 
 __all__ = ["SegmentSample", "TableSize", "sample_segments", "scalar_axis_error", "thickness_axis_error",
@@ -257,6 +258,8 @@ def choose_table_size(tf: TransferFunction, mesh: TetMesh, *, tolerance: float =
     if (isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not math.isfinite(tolerance)
             or tolerance <= 0):
         raise ValueError(f"tolerance must be a positive number, got {tolerance!r}")
+    # A subnormal unit distance turns every estimate into NaN (and no size is ever chosen).
+    check_unit_distance(tf.unit_distance, "the transfer function's unit_distance")
     sample = sample if sample is not None else segment_sample(mesh)
     return _choose(tf, sample, mesh.scalar_range, mesh.max_edge, float(tolerance), n_bins, n_slices,
                    float(log_base), encoding, optics, bool(align_nodes))
@@ -287,6 +290,10 @@ def _choose(tf: TransferFunction, sample: SegmentSample, data_range: tuple[float
     if good:
         return min(good, key=lambda o: (cost[o], o.error))
     best = min(o.error for o in options)
+    if not math.isfinite(best):  # NaN compares false: nothing would be within any tie of it
+        raise ValueError(f"the table-size estimates are not finite ({[o.error for o in options]}) for a transfer "
+                         f"function of unit_distance {tf.unit_distance!r} over scalars {data_range!r} and cells up "
+                         f"to {d_max!r} long; give table_scalar_bins and table_thickness_slices explicitly")
     return min((o for o in options if o.error <= best * (1 + _TIE)), key=lambda o: (cost[o], o.error))
 
 

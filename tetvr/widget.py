@@ -559,11 +559,17 @@ class ViewerModel:
         """Draw what ``request`` asks for."""
         from .sort import visibility_order
 
+        from .method import choose
+
         t0 = time.perf_counter()
-        if request.sort or self.order is None or self.order.shape[0] != self.mesh.n_tets:
-            self.order = visibility_order(self.mesh, self.camera, self.settings.sort)
+        order = None  # tet marching needs no order
+        if choose(self.settings, self.mesh) == "projected":
+            # Projected tetrahedra: previews reuse the last order; refined frames sort anew.
+            if request.sort or self.order is None or self.order.shape[0] != self.mesh.n_tets:
+                self.order = visibility_order(self.mesh, self.camera, self.settings.sort)
+            order = self.order
         image = self.renderer.render(self.mesh, self.camera, self.editor.transfer_function(), size=request.size,
-                                     order=self.order)
+                                     order=order)
         self.last_seconds = time.perf_counter() - t0
         self.last_request = request
         return image

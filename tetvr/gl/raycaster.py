@@ -28,9 +28,9 @@ from ..preintegrate import PreintegrationTable, table_for, table_scalar_range
 from ..raycast_reference import INTERPOLATIONS, RAYCAST_MODES, RaycastSettings, normalize_ray_limits
 from ..transfer import TransferFunction
 from ..volume import Volume
-from .context import create_context, describe
+from .context import context_alive, create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
-from .util import Clock, GLOwner, check_size, set_uniforms, table_texture
+from .util import Clock, GLOwner, check_size, clear_gl_errors, gl_locked, locked, set_uniforms, table_texture
 
 __all__ = ["Raycaster", "RaycastStats", "MODES"]
 
@@ -106,15 +106,24 @@ class Raycaster(GLOwner):
 
     def __init__(self, settings: RaycastSettings | None = None, *, ctx: Any = None,
                  max_texture_size: int | None = None, profile: bool = False) -> None:
-        self.settings = settings or RaycastSettings()
-        if not isinstance(self.settings, RaycastSettings):
-            raise TypeError(f"settings must be RaycastSettings, got {type(self.settings).__name__}")
+        # Arguments are checked before a context is made: a refused one leaks nothing.
+        if settings is None:
+            settings = RaycastSettings()
+        elif not isinstance(settings, RaycastSettings):
+            hint = " (for a dict of fields, pass RaycastSettings.from_dict(it))" if isinstance(settings, dict) else ""
+            raise TypeError(f"settings must be a RaycastSettings or None, got {type(settings).__name__}{hint}")
+        if max_texture_size is not None and (isinstance(max_texture_size, bool)
+                                             or not isinstance(max_texture_size, (int, np.integer))
+                                             or max_texture_size < 2):
+            raise ValueError(f"max_texture_size must be an integer of at least 2, got {max_texture_size!r}")
+        if ctx is not None and not context_alive(ctx):
+            raise RuntimeError("ctx has been released: a Raycaster needs a live OpenGL context (pass ctx=None to "
+                               "make one, or the ctx of a Renderer that is not released)")
+        self.settings = settings
         self._owns_ctx = ctx is None
         self.ctx: Any = create_context() if ctx is None else ctx
-        self.gl_info = describe(self.ctx)
+        self.gl_info = describe(self.ctx)  # under the context's lock; caches ctx.info
         gl_max = int(self.ctx.info.get("GL_MAX_3D_TEXTURE_SIZE", 2048))
-        if max_texture_size is not None and not (2 <= int(max_texture_size)):
-            raise ValueError(f"max_texture_size must be at least 2, got {max_texture_size!r}")
         self.max_texture_size = min(gl_max, int(max_texture_size)) if max_texture_size is not None else gl_max
         self.profile = profile
         self._programs: dict[tuple[str, ...], Any] = {}
@@ -152,6 +161,7 @@ class Raycaster(GLOwner):
         return objs
 
     # ---- programs ----
+    @gl_locked  # tests and tools call it directly
     def _program(self, mode: str, interpolation: str = "linear") -> Any:
         spec = MODES[mode]
         defines = dict(spec.defines)
@@ -174,6 +184,7 @@ class Raycaster(GLOwner):
         return prog
 
     # ---- cached GPU state ----
+    @locked
     def gpu_volume(self, volume: Volume) -> Volume:
         """The volume as it is (or will be) on the GPU: ``volume``, or a downsampled copy
         if an axis exceeds :attr:`max_texture_size` (warns once per volume)."""
@@ -204,6 +215,7 @@ class Raycaster(GLOwner):
         self._volume, self._gpu_volume = volume, gpu
         return gpu
 
+    @locked
     def table(self, volume: Volume, tf: TransferFunction, settings: RaycastSettings | None = None) -> PreintegrationTable:
         """The pre-integration table for a volume, transfer function and step.
 
@@ -274,6 +286,7 @@ class Raycaster(GLOwner):
         self._fbo_size = size
 
     # ---- the frame ----
+    @gl_locked
     def render(
         self,
         volume: Volume,
@@ -300,17 +313,16 @@ class Raycaster(GLOwner):
         -------
         (height, width, 4) float32 premultiplied RGBA, row 0 at the top.
         """
-        self._check_alive()
-        # Creating a context makes it current; enter ours so that every call below
-        # reaches it even when other contexts were created (or released) since.
-        with self.ctx:
-            return self._render(volume, camera, tf, size, t_start, t_end, settings)
+        # gl_locked: the context is current in this thread (whatever other contexts were
+        # made or released since), and no other thread uses it until we return.
+        return self._render(volume, camera, tf, size, t_start, t_end, settings)
 
     def _render(self, volume: Volume, camera: Camera, tf: TransferFunction, size: tuple[int, int],
                 t_start: ArrayLike | None, t_end: ArrayLike | None, settings: RaycastSettings | None) -> NDArray[np.float32]:
         check_instances(volume=(volume, Volume), camera=(camera, Camera), tf=(tf, TransferFunction))
         s = settings or self.settings
         width, height = check_size(size, self.ctx)
+        clear_gl_errors(self.ctx)  # what a failed earlier frame left is not this frame's error
         clock = Clock(self.ctx, self.profile)
 
         gpu = self._use_volume(volume)

@@ -26,7 +26,9 @@ from ..sort import sort_with_stats
 from ..transfer import TransferFunction
 from .context import create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
-from .util import Clock, GLOwner, check_size, set_uniforms, table_texture
+from ..method import choose
+from .raymarch import Marcher
+from .util import Clock, GLOwner, check_size, gl_locked, locked, set_uniforms, table_texture
 
 __all__ = ["Renderer", "FrameStats"]
 
@@ -55,12 +57,14 @@ class FrameStats:
     table: float = 0.0
     setup: float = 0.0  # program choice, uniforms, target clear
     draw: float = 0.0
+    entry: float = 0.0  # tet marching: the entry (boundary) passes
+    march: float = 0.0  # tet marching: the march passes
     readback: float = 0.0
 
     @property
     def total(self) -> float:
         return (self.upload + self.classify + self.sort + self.order_upload + self.table + self.setup + self.draw
-                + self.readback)
+                + self.entry + self.march + self.readback)
 
 
 class Renderer(GLOwner):
@@ -81,15 +85,22 @@ class Renderer(GLOwner):
 
     def __init__(self, settings: RenderSettings | None = None, *, profile: bool = False,
                  chunk_tets: int | None = None) -> None:
-        self.settings = settings or RenderSettings()
-        self.profile = profile
+        # Arguments are checked before the context is made: a refused one leaks nothing.
+        if settings is None:
+            settings = RenderSettings()
+        elif not isinstance(settings, RenderSettings):
+            hint = " (for a dict of fields, pass RenderSettings.from_dict(it))" if isinstance(settings, dict) else ""
+            raise TypeError(f"settings must be a RenderSettings or None, got {type(settings).__name__}{hint}")
+        if chunk_tets is not None and not (isinstance(chunk_tets, int) and not isinstance(chunk_tets, bool)
+                                           and 1 <= chunk_tets):
+            raise ValueError(f"chunk_tets must be a positive integer, got {chunk_tets!r}")
+        self.settings = settings
+        self.profile = bool(profile)
         self.ctx: Any = create_context()
         # One storage buffer must hold a chunk's fans (48 B/tet); meshes beyond it are drawn
         # in sorted chunks, each classified and drawn in turn.
         self._max_ssbo = int(self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE", 1 << 27))
         limit = self._max_ssbo // _FAN_BYTES
-        if chunk_tets is not None and not (isinstance(chunk_tets, int) and 1 <= chunk_tets):
-            raise ValueError(f"chunk_tets must be a positive integer, got {chunk_tets!r}")
         self.chunk_tets = min(chunk_tets or _DEFAULT_CHUNK, limit)
         self._chunked = False
         self.gl_info = describe(self.ctx)
@@ -99,6 +110,8 @@ class Renderer(GLOwner):
         self._centre = np.zeros(3)
         self._fans: Any = None
         self._order: Any = None
+        self._marcher: Marcher | None = None  # the tet-marching ray caster's GL state, made on first use
+        self._exact_count: Any = None  # classify.comp's count of fans on the exact path
         self._fan_indices: Any = None  # index buffer of fan patterns (_reserve_fans), made on first draw
         self._table: PreintegrationTable | None = None  # the table in the texture
         self._table_cache: tuple[tuple[Any, ...], PreintegrationTable] | None = None  # table()'s last (key, table)
@@ -115,17 +128,23 @@ class Renderer(GLOwner):
         self._vaos.clear()
         self._mesh_buffers = []
         self._targets.clear()
-        self._fans = self._order = self._table_tex = self._fan_indices = None
+        self._fans = self._order = self._table_tex = self._fan_indices = self._exact_count = None
         self._mesh = None
         self._table = self._table_cache = None
+        if self._marcher is not None:
+            self._marcher.forget()
 
     def _gl_objects(self) -> list[Any]:
         objs = [*self._vaos.values(), *self._programs.values(), *self._mesh_buffers]
-        objs += [o for o in (self._fans, self._order, self._table_tex, self._fan_indices) if o is not None]
+        if self._marcher is not None:
+            objs += self._marcher.gl_objects()
+        objs += [o for o in (self._fans, self._order, self._table_tex, self._fan_indices, self._exact_count)
+                 if o is not None]
         for fbo in self._targets.values():
             objs += [fbo, *fbo.color_attachments]
         return objs
 
+    @locked
     def gpu_bytes(self) -> int:
         """Bytes of GPU memory held in this renderer's buffers, table and targets."""
         total = sum(b.size for b in [*self._mesh_buffers, self._fans, self._order, self._fan_indices] if b is not None)
@@ -133,9 +152,12 @@ class Renderer(GLOwner):
             total += self._table.data.nbytes
         for (size, components, dtype) in self._targets:
             total += size[0] * size[1] * components * (4 if dtype == "f4" else 1)
+        if self._marcher is not None:
+            total += self._marcher.gpu_bytes()
         return int(total)
 
     # ---- programs ----
+    @gl_locked  # tests and tools call it directly
     def _program(self, kind: str, **defines: int) -> Any:
         key = (kind, *(f"{k}={v}" for k, v in sorted(defines.items())))
         prog = self._programs.get(key)
@@ -144,7 +166,9 @@ class Renderer(GLOwner):
         programs = {"classify": {"compute_shader": "classify.comp"},
                     "tet": {"vertex_shader": "tet.vert", "fragment_shader": "tet.frag"},
                     "floor": {"vertex_shader": "tet.vert", "fragment_shader": "floor.frag"},
-                    "depth": {"vertex_shader": "tet.vert", "fragment_shader": "depth.frag"}}
+                    "depth": {"vertex_shader": "tet.vert", "fragment_shader": "depth.frag"},
+                    "march_entry": {"vertex_shader": "march_entry.vert", "fragment_shader": "march_entry.frag"},
+                    "march": {"vertex_shader": "raycast.vert", "fragment_shader": "march.frag"}}
         if kind not in programs:
             raise ValueError(f"unknown shader {kind!r}; choose one of {sorted(programs)}")
         stages = programs[kind]
@@ -212,6 +236,12 @@ class Renderer(GLOwner):
             return
         for first in range(0, int(order.shape[0]), self.chunk_tets):
             ids = order[first:first + self.chunk_tets]
+            if first:
+                # llvmpipe shades fragments when the scene is flushed, not at the draw, and
+                # does not flush for a write to a storage buffer that a fragment shader reads
+                # (tet.frag's exact segments read the tets buffer): without this wait the
+                # previous chunk's near-plane fragments read this chunk's cells.
+                self.ctx.finish()
             self._mesh_buffers[1].write(np.ascontiguousarray(mesh.tets[ids], dtype=np.int32).tobytes())
             self._clock.lap("order_upload")
             yield int(ids.shape[0]), int(ids.shape[0])
@@ -244,6 +274,7 @@ class Renderer(GLOwner):
         return fbo
 
     # ---- the frame ----
+    @locked
     def table(self, mesh: TetMesh, tf: TransferFunction) -> PreintegrationTable:
         """The pre-integration table this renderer uses for a mesh and transfer function.
 
@@ -273,20 +304,32 @@ class Renderer(GLOwner):
         near, far = camera.clipping_range
         proj = camera.projection_matrix(size[0] / size[1])
         return dict(u_view=view, u_proj=proj, u_perspective=0 if camera.parallel_projection else 1,
+                    u_half_px=(size[0] / 2.0, size[1] / 2.0),
                     u_near=near, u_far=far, u_ray_scale=(1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1])))
 
-    def _classify(self, n_tets: int, uniforms: dict[str, Any]) -> None:
-        """Run classify.comp over the tets in the tets buffer."""
+    def _classify(self, n_tets: int, uniforms: dict[str, Any], *, count_exact: bool = False) -> int:
+        """Run classify.comp over the tets in the tets buffer; with ``count_exact``, return
+        how many fans take the exact per-fragment path (a 4-byte read that waits for the
+        classification), else 1."""
         classify = self._program("classify")
         set_uniforms(classify, u_count=n_tets, **uniforms)
+        if self._exact_count is None:
+            self._exact_count = self.ctx.buffer(reserve=4)
+        self._exact_count.write(b"\0\0\0\0")
         self._mesh_buffers[0].bind_to_storage_buffer(0)
         self._mesh_buffers[1].bind_to_storage_buffer(1)
         self._fans.bind_to_storage_buffer(2)
+        self._exact_count.bind_to_storage_buffer(4)
         groups = (n_tets + _GROUP - 1) // _GROUP
         for first in range(0, groups, _MAX_GROUPS):
             set_uniforms(classify, u_offset=first * _GROUP)
             classify.run(min(_MAX_GROUPS, groups - first))
+        n_exact = 1
+        if count_exact:
+            self.ctx.memory_barrier()
+            n_exact = int(np.frombuffer(self._exact_count.read(), dtype=np.uint32)[0])
         self._clock.lap("classify")
+        return n_exact
 
     def _draw(self, prog: Any, fbo: Any, n_tets: int, blend: tuple[Any, ...]) -> None:
         import moderngl
@@ -336,10 +379,19 @@ class Renderer(GLOwner):
         return image
 
     def _check(self, size: tuple[int, int]) -> tuple[int, int]:
+        """Start a frame: the size checked against the GL's limits and memory before any GL
+        call, and the error flags a failed earlier frame may have left (a texture it could
+        not make: ``GL_OUT_OF_MEMORY``) cleared, so this frame's own check after the
+        readback reports only this frame's errors."""
+        from .util import clear_gl_errors
+
         self._check_alive()
         self._clock = Clock(self.ctx, self.profile)
-        return check_size(size, self.ctx)
+        size = check_size(size, self.ctx)
+        clear_gl_errors(self.ctx)
+        return size
 
+    @gl_locked
     def render(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, *, size: tuple[int, int] = (512, 512),
                order: NDArray[np.integer[Any]] | None = None, shader: str = "tet") -> NDArray[np.float32]:
         """Render one frame.
@@ -357,8 +409,7 @@ class Renderer(GLOwner):
         (height, width, 4) float32 premultiplied RGBA, row 0 at the top.
         """
         self._check_alive()
-        with self.ctx:  # ours may not be current: another context may have been made since
-            return self._render(mesh, camera, tf, size, order, shader)
+        return self._render(mesh, camera, tf, size, order, shader)
 
     def _render(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, size: tuple[int, int],
                 order: NDArray[np.integer[Any]] | None, shader: str) -> NDArray[np.float32]:
@@ -369,6 +420,8 @@ class Renderer(GLOwner):
         table = self.table(mesh, tf)
         self._use_table(table)
         self._clock.lap("table")
+        if shader == "tet" and order is None and choose(self.settings, mesh) == "raymarch":
+            return self._raymarch(mesh, camera, table, size)
         uniforms = self._view_uniforms(mesh, camera, size)
         cycle_breaks = n_culled = 0
         if order is None:
@@ -397,10 +450,13 @@ class Renderer(GLOwner):
                        TABLE_CUBIC=int(self.settings.table_filter == "cubic"))
         if shader == "tet":
             before_near, beyond_far = _outside_clipping_range(mesh, camera)
-            defines.update(NEAR_CROSSING=int(before_near), CLIP_RANGE=int(before_near or beyond_far),
-                           PERSPECTIVE=int(not camera.parallel_projection))
-        prog = self._program(shader, **defines)
-        set_uniforms(prog, **table.gl_uniforms(), **uniforms)
+            defines.update(CLIP_RANGE=int(before_near or beyond_far), PERSPECTIVE=int(not camera.parallel_projection))
+        # Two variants: tet.frag's exact per-fragment branch compiled in or not (NEAR_CROSSING),
+        # the first for the draws whose classification sent some tet down that path.
+        progs = [self._program(shader, **defines, **({"NEAR_CROSSING": on} if shader == "tet" else {}))
+                 for on in (0, 1)]
+        for prog in progs:
+            set_uniforms(prog, **table.gl_uniforms(), **uniforms)
         fb_dtype = "f4" if self.settings.framebuffer == "float32" else "f1"
         fbo = self._use_target(size, 4, fb_dtype)
         fbo.use()
@@ -408,13 +464,35 @@ class Renderer(GLOwner):
         self._table_tex.use(0)  # nothing in the loop binds another texture
         self._clock.lap("setup")
         for n_classify, n in self._chunks(mesh, order_ids):
-            self._classify(n_classify, uniforms)
-            self._draw(prog, fbo, n, ((moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA), moderngl.FUNC_ADD))
+            n_exact = self._classify(n_classify, uniforms, count_exact=True)
+            self._draw(progs[n_exact > 0], fbo, n, ((moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA), moderngl.FUNC_ADD))
         image = self._read(fbo, size, 4, fb_dtype)
         self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, cycle_breaks=cycle_breaks, n_culled=n_culled,
                                      **self._clock.laps)
         return image
 
+    def _raymarch(self, mesh: TetMesh, camera: Camera, table: PreintegrationTable, size: tuple[int, int]
+                  ) -> NDArray[np.float32]:
+        """One frame by tet marching (:mod:`tetvr.gl.raymarch`), with this renderer's table."""
+        if self._marcher is None:
+            self._marcher = Marcher(self)
+        view = camera.view_matrix()
+        view[:3, 3] += view[:3, :3] @ mesh.bounds.mean(axis=0)  # the records are relative to the centre
+        near, far = camera.clipping_range
+        proj = camera.projection_matrix(size[0] / size[1])
+        uniforms = dict(u_view=view, u_proj=proj, u_near=near, u_far=far,
+                        u_ray_scale=(1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1])))
+        defines = dict(TABLE_NORMALIZED=int(table.encoding == "normalized"),
+                       TABLE_CUBIC=int(self.settings.table_filter == "cubic"))
+        self._table_tex.use(0)
+        image = self._marcher.render(mesh, camera, size, uniforms, table.gl_uniforms(), defines, self._clock)
+        err = self.ctx.error
+        if err != "GL_NO_ERROR":
+            raise RuntimeError(f"OpenGL error after rendering: {err}")
+        self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, **self._clock.laps)
+        return image
+
+    @gl_locked
     def depth_extent(self, mesh: TetMesh, camera: Camera, *, size: tuple[int, int] = (512, 512)
                      ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         """Per pixel, the eye depth of the mesh's nearest entry and farthest exit.
@@ -423,9 +501,7 @@ class Renderer(GLOwner):
         clipping range; ``+inf`` / ``-inf`` where no tet covers the pixel. These are the ray
         limits for fusing the mesh with a ray-cast volume (:mod:`tetvr.fuse`).
         """
-        self._check_alive()
-        with self.ctx:
-            return self._depth_extent(mesh, camera, size)
+        return self._depth_extent(mesh, camera, size)
 
     def _depth_extent(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]
                       ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
@@ -433,7 +509,8 @@ class Renderer(GLOwner):
 
         size = self._check(size)
         uniforms = self._view_uniforms(mesh, camera, size)
-        prog = self._program("depth", PERSPECTIVE_CORRECT=int(self.settings.perspective_correct))
+        prog = self._program("depth", PERSPECTIVE_CORRECT=int(self.settings.perspective_correct),
+                             PERSPECTIVE=int(not camera.parallel_projection))
         set_uniforms(prog, **uniforms)
         fbo = self._use_target(size, 2)
         fbo.use()

@@ -3,20 +3,52 @@
 from __future__ import annotations
 
 import abc
+import contextlib
+import ctypes
+import functools
 import time
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, Callable, Concatenate, Iterator, ParamSpec, TypeVar
 
 import numpy as np
 
-from ..image import image_size
+from ..image import _gib, check_memory, image_size
+from .context import ForkedProcessError, check_not_forked, context_alive, context_lock, current_in_thread
 
 if TYPE_CHECKING:
     from ..preintegrate import PreintegrationTable
 
-__all__ = ["GLOwner", "check_size", "set_uniforms", "table_texture", "Clock"]
+__all__ = ["GLOwner", "gl_locked", "locked", "check_size", "clear_gl_errors", "free_video_memory", "make_target", "set_uniforms",
+           "table_texture", "Clock"]
 
 
 _Owner = TypeVar("_Owner", bound="GLOwner")
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+
+def gl_locked(method: Callable[Concatenate[_Owner, _P], _R]) -> Callable[Concatenate[_Owner, _P], _R]:
+    """Decorate a :class:`GLOwner` method that touches GL: it runs holding the context's
+    lock, with the context current in the calling thread, after :meth:`GLOwner._check_alive`.
+    So one renderer (or several sharing a context) can be called from many threads."""
+
+    @functools.wraps(method)
+    def locked_method(self: _Owner, *args: _P.args, **kwargs: _P.kwargs) -> _R:
+        with self._gl_scope():
+            return method(self, *args, **kwargs)
+
+    return locked_method
+
+
+def locked(method: Callable[Concatenate[_Owner, _P], _R]) -> Callable[Concatenate[_Owner, _P], _R]:
+    """Decorate a :class:`GLOwner` method that reads or changes its state but makes no GL
+    call: it runs holding the context's lock only (and works after release)."""
+
+    @functools.wraps(method)
+    def locked_method(self: _Owner, *args: _P.args, **kwargs: _P.kwargs) -> _R:
+        with context_lock(self.ctx):
+            return method(self, *args, **kwargs)
+
+    return locked_method
 
 
 class GLOwner(abc.ABC):
@@ -24,6 +56,12 @@ class GLOwner(abc.ABC):
     and every GL object made in it, released together by :meth:`release` or on leaving a
     ``with`` block. Subclasses list their objects in :meth:`_gl_objects` and drop their
     references in :meth:`_forget`; nothing relies on ``__del__``.
+
+    Threads: every method that touches GL is decorated with :func:`gl_locked`: it holds
+    the context's re-entrant lock (one per context, shared by all its owners) and makes
+    the context current in the calling thread for the call only. So one renderer may be
+    called from several threads, one call at a time. Between calls the context is current
+    in no thread; to use ``ctx`` directly, enter ``with owner.ctx:`` in one thread.
     """
 
     ctx: Any
@@ -37,25 +75,51 @@ class GLOwner(abc.ABC):
         self.release()
 
     def release(self) -> None:
-        """Release every GL object (and the context, if this object made it). Safe twice."""
+        """Release every GL object (and the context, if this object made it). Safe twice,
+        from any thread, after a borrowed context was released by its owner (its GL objects
+        went with it), and in a forked child (which drops its references without GL)."""
         if self._released:
             return
-        # Creating another context (a Raycaster, a second Renderer) makes it current:
-        # enter ours so that the releases below reach it, and unbind any framebuffer of
-        # ours first (a released framebuffer left bound is a dead name the next
-        # framebuffer's creation trips over).
-        with self.ctx:
-            self.ctx.detect_framebuffer(0).use()
-            for obj in self._gl_objects():
-                obj.release()
-        self._forget()
-        if self._owns_ctx:
-            self.ctx.release()
-        self._released = True
+        try:
+            check_not_forked()
+        except ForkedProcessError:
+            # The child's copy of the GL state cannot be touched (GL would hang); it goes
+            # with the process.
+            self._forget()
+            self._released = True
+            return
+        with context_lock(self.ctx):
+            if self._released:  # another thread was first
+                return
+            if context_alive(self.ctx):
+                with current_in_thread(self.ctx):
+                    # Unbind any framebuffer of ours first: a released framebuffer left bound
+                    # is a dead name the next framebuffer's creation trips over.
+                    self.ctx.detect_framebuffer(0).use()
+                    for obj in self._gl_objects():
+                        obj.release()
+                    if self._owns_ctx:
+                        self.ctx.release()
+            self._forget()
+            self._released = True
 
     def _check_alive(self) -> None:
+        name = type(self).__name__
         if self._released:
-            raise RuntimeError(f"this {type(self).__name__} has been released")
+            raise RuntimeError(f"this {name} has been released")
+        if not context_alive(self.ctx):
+            raise RuntimeError(f"the OpenGL context of this {name} has been released: it was borrowed, and its "
+                               f"owner (e.g. the Renderer whose ctx it shares) was released first. Make a new {name}, "
+                               f"and release it before the context's owner")
+
+    @contextlib.contextmanager
+    def _gl_scope(self) -> Iterator[None]:
+        """Hold the context's lock with the context current in this thread (:func:`gl_locked`)."""
+        check_not_forked()  # before the lock: one that a thread of the parent held stays held
+        with context_lock(self.ctx):
+            self._check_alive()  # inside the lock: another thread may have released us meanwhile
+            with current_in_thread(self.ctx):
+                yield
 
     @abc.abstractmethod
     def _gl_objects(self) -> list[Any]:
@@ -66,13 +130,131 @@ class GLOwner(abc.ABC):
         """Drop the references to released GL objects and cached GPU state."""
 
 
-def check_size(size: tuple[int, int], ctx: Any) -> tuple[int, int]:
-    """(width, height) as ints, within 1 .. the GL's texture and viewport limit."""
+#: Mesa's software rasterisers (their textures live in host memory).
+_SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast")
+#: llvmpipe refuses a texture whose storage, with room for the whole mipmap chain and
+#: levels padded to 4 x 4 pixels, passes 2 GiB (``LP_MAX_TEXTURE_SIZE``: its 32-bit
+#: signed offsets); a plain ``GL_OUT_OF_MEMORY`` at ``ctx.texture`` was all it said.
+_LLVMPIPE_TEXTURE_BYTES = 1 << 31
+
+
+def check_size(size: tuple[int, int], ctx: Any, *, bytes_per_pixel: int = 16) -> tuple[int, int]:
+    """(width, height) as ints, checked against the GL's real limits before any GL call.
+
+    Each side must be within ``GL_MAX_TEXTURE_SIZE``, ``GL_MAX_RENDERBUFFER_SIZE`` and
+    ``GL_MAX_VIEWPORT_DIMS`` (``ValueError``); the render target of ``bytes_per_pixel``
+    (16: RGBA float32) must fit the GL's memory (llvmpipe's per-texture limit, or the
+    free video memory where the driver reports it) and its readback the host's
+    (``MemoryError``, naming the sizes). A frame that would fail half-way through
+    making its target fails here instead, with the renderer untouched.
+    """
     width, height = image_size(size)
-    limit = int(min(ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384), ctx.info.get("GL_MAX_VIEWPORT_DIMS", (16384,))[0]))
+    info = ctx.info
+    viewport = info.get("GL_MAX_VIEWPORT_DIMS", (16384, 16384))
+    limits = {"GL_MAX_TEXTURE_SIZE": int(info.get("GL_MAX_TEXTURE_SIZE", 16384)),
+              "GL_MAX_RENDERBUFFER_SIZE": int(info.get("GL_MAX_RENDERBUFFER_SIZE", 16384)),
+              "GL_MAX_VIEWPORT_DIMS": int(min(viewport))}
+    limit = min(limits.values())
     if not (1 <= width <= limit and 1 <= height <= limit):
-        raise ValueError(f"image size {size!r} is outside 1..{limit} pixels per side (the GL limit here)")
+        raise ValueError(f"image size {size!r} is outside 1..{limit} pixels per side (the GL limit here): "
+                         + ", ".join(f"{k} {v}" for k, v in limits.items()))
+    need = width * height * bytes_per_pixel
+    what = f"a {width}x{height} image ({bytes_per_pixel} bytes a pixel)"
+    renderer = str(info.get("GL_RENDERER", "")).lower()
+    software = any(name in renderer for name in _SOFTWARE_GL)
+    if software and _mipmapped_bytes(width, height, bytes_per_pixel) > _LLVMPIPE_TEXTURE_BYTES:
+        raise MemoryError(f"{what} needs a {_gib(need)} render target; {info.get('GL_RENDERER', 'this GL')} "
+                          f"makes textures of at most {_gib(_LLVMPIPE_TEXTURE_BYTES * 3 // 4)}: render it smaller")
+    free = None if software else free_video_memory(ctx)
+    if free is not None and need > free:
+        raise MemoryError(f"{what} needs a {_gib(need)} render target; the GPU reports {_gib(free)} free")
+    # The readback holds the pixels twice (the bytes read and the flipped image); a
+    # software rasteriser's target is in host memory as well.
+    check_memory((3 if software else 2) * need, f"rendering {what}")
     return width, height
+
+
+def _mipmapped_bytes(width: int, height: int, bytes_per_pixel: int) -> int:
+    """Storage llvmpipe reserves for a 2D texture: every mip level, padded to 4 x 4."""
+    total = 0
+    while True:
+        total += -(-width // 4) * 4 * -(-height // 4) * 4 * bytes_per_pixel
+        if width == height == 1:
+            return total
+        width, height = max(1, width // 2), max(1, height // 2)
+
+
+def free_video_memory(ctx: Any) -> int | None:
+    """Bytes of free video memory, where the driver reports it (``GL_NVX_gpu_memory_info``,
+    ``GL_ATI_meminfo``), else None. Read with ``glGetIntegerv``, which moderngl does not
+    expose, from the GL library: ``ctx`` must be current (as it is during a frame); with
+    no context current the call does nothing and the answer is None."""
+    extensions = getattr(ctx, "extensions", set())
+    if "GL_NVX_gpu_memory_info" in extensions:
+        pname = 0x9049  # GL_GPU_MEMORY_INFO_CURRENT_AVAILABLE_VIDMEM_NVX, KiB
+    elif "GL_ATI_meminfo" in extensions:
+        pname = 0x87FC  # GL_TEXTURE_FREE_MEMORY_ATI: (total free KiB, largest block, ...)
+    else:
+        return None
+    get = _gl_get_integerv()
+    if get is None:
+        return None
+    out = (ctypes.c_int * 4)()
+    get(pname, out)
+    if clear_gl_errors(ctx):
+        return None
+    return int(out[0]) * 1024 if out[0] > 0 else None
+
+
+@functools.lru_cache(maxsize=1)
+def _gl_get_integerv() -> Any:
+    for name in ("libGL.so.1", "libOpenGL.so.0", "libGL.so"):
+        try:
+            fn = ctypes.CDLL(name).glGetIntegerv
+        except (OSError, AttributeError):
+            continue
+        fn.restype = None
+        fn.argtypes = [ctypes.c_uint, ctypes.POINTER(ctypes.c_int)]
+        return fn
+    return None
+
+
+def clear_gl_errors(ctx: Any) -> list[str]:
+    """Read and clear every pending GL error flag (a failed frame can leave one, e.g.
+    ``GL_OUT_OF_MEMORY`` from a texture that could not be made, which the next frame's
+    own check would otherwise report as its error); returns what was pending."""
+    pending = []
+    for _ in range(16):  # one flag per kind of error at most; a lost context keeps answering
+        err = ctx.error
+        if err == "GL_NO_ERROR":
+            break
+        pending.append(err)
+    return pending
+
+
+def make_target(ctx: Any, size: tuple[int, int], components: int, dtype: str) -> tuple[Any, Any]:
+    """A colour texture and a framebuffer over it, or an error with nothing left behind:
+    a texture the GL could not make, or a framebuffer it calls incomplete, is released, the
+    default framebuffer bound and the GL's error flags cleared, so the owner's next frame
+    starts clean. Raises ``MemoryError`` for ``GL_OUT_OF_MEMORY``, else ``RuntimeError``."""
+    tex = fbo = None
+    try:
+        tex = ctx.texture(size, components, dtype=dtype)
+        err = ctx.error
+        if err != "GL_NO_ERROR":
+            raise RuntimeError(err)
+        fbo = ctx.framebuffer(color_attachments=[tex])
+        return tex, fbo
+    except Exception as exc:
+        ctx.detect_framebuffer(0).use()
+        for obj in (fbo, tex):
+            if obj is not None:
+                obj.release()
+        pending = [str(exc)] + clear_gl_errors(ctx)
+        what = f"could not make a {size[0]}x{size[1]} render target of {components} x {dtype} ({', '.join(pending)})"
+        if any("OUT_OF_MEMORY" in p for p in pending):
+            raise MemoryError(what) from exc
+        raise RuntimeError(what) from exc
 
 
 def table_texture(ctx: Any, table: "PreintegrationTable") -> Any:

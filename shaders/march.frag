@@ -1,0 +1,105 @@
+#version 430
+// march.frag -- the tet-marching ray caster (Weiler et al. 2003): from its entry, each
+// pixel's ray walks from tet to tet through shared faces, integrating one exact segment per
+// tet by a lookup in the pre-integration table (lookup.glsl), composited front to back.
+//
+// In:  u_entry_depth / u_entry (march_entry.frag: depth 1 where no entry; 4 * tet + k or
+//      -2 - tet), and, after the first layer (FIRST 0), the last march's f_color, f_state
+//      and f_last. Records and rays: march_common.glsl.
+// Out: f_color premultiplied RGBA so far; f_state = (t where the walk stopped, status:
+//      STATUS_REENTER if the ray left the mesh and may enter again, else STATUS_DONE);
+//      f_last the entry this pass started from (the next peel skips it).
+// The walk leaves each tet by the nearest of the three faces other than the one it came in
+// by whose plane the ray points out of; the scalar is carried from face to face (it is
+// continuous: point data is linear in each tet), so each step reads three planes, the
+// scalar record and the mates.
+
+#include "march_common.glsl"
+#include "lookup.glsl"
+
+uniform sampler2D u_entry_depth;
+uniform isampler2D u_entry;
+#if !FIRST
+uniform sampler2D u_color_in;
+uniform sampler2D u_state_in;
+uniform isampler2D u_last_in;
+#endif
+uniform int u_max_steps;      // bound on tets per ray and layer (a walk caught by rounding)
+uniform float u_opaque;       // stop once alpha reaches this (early ray termination)
+
+layout(location = 0) out vec4 f_color;
+layout(location = 1) out vec2 f_state;
+layout(location = 2) out int f_last;
+
+void main() {
+    ivec2 px = ivec2(gl_FragCoord.xy);
+#if FIRST
+    vec4 acc = vec4(0.0);
+    f_last = -1;
+    f_state = vec2(0.0, STATUS_DONE);
+#else
+    vec4 acc = texelFetch(u_color_in, px, 0);
+    vec2 state = texelFetch(u_state_in, px, 0).xy;
+    f_last = texelFetch(u_last_in, px, 0).r;
+    f_state = vec2(state.x, STATUS_DONE);
+    if (state.y != STATUS_REENTER) {
+        f_color = acc;
+        return;
+    }
+#endif
+    f_color = acc;
+    if (texelFetch(u_entry_depth, px, 0).r >= 1.0) return;  // no (further) entry
+    int entry = texelFetch(u_entry, px, 0).r;
+    f_last = entry;
+
+    vec3 o, d;
+    pixel_ray(gl_FragCoord.xy, o, d);
+    float per_t = length(d);  // world length per unit of t
+    int tet, face;
+    float t_in;
+    if (entry >= 0) {
+        tet = entry >> 2;
+        face = entry & 3;
+        t_in = max(plane_t(face_plane(tet, face), o, d), u_near);
+    } else {
+        tet = -2 - entry;
+        face = -1;
+        t_in = u_near;
+    }
+    vec4 g = tet_scalar(tet);
+    float s_in = dot(g.xyz, o + t_in * d) + g.w;
+    float status = STATUS_DONE;
+    float t_out = t_in;
+    for (int step = 0; step < u_max_steps; ++step) {
+        float t_exit = 3.0e38;
+        int exit_face = -1;
+        for (int k = 0; k < 4; ++k) {
+            if (k == face) continue;
+            vec4 plane = face_plane(tet, k);
+            float den = dot(plane.xyz, d);
+            if (den > 0.0) {
+                float t = -(dot(plane.xyz, o) + plane.w) / den;
+                if (t < t_exit) { t_exit = t; exit_face = k; }
+            }
+        }
+        if (exit_face < 0) break;  // no face ahead: only rounding on a degenerate ray does this
+        t_out = max(t_exit, t_in);
+        bool at_far = t_out >= u_far;
+        if (at_far) t_out = u_far;
+        float s_out = dot(g.xyz, o + t_out * d) + g.w;
+        acc += (1.0 - acc.a) * lookup_segment(s_in, s_out, (t_out - t_in) * per_t);
+        if (at_far || acc.a >= u_opaque) break;
+        int mate = tet_mates(tet)[exit_face];
+        if (mate < 0) {
+            status = STATUS_REENTER;
+            break;
+        }
+        tet = mate >> 2;
+        face = mate & 3;
+        t_in = t_out;
+        s_in = s_out;
+        g = tet_scalar(tet);
+    }
+    f_color = acc;
+    f_state = vec2(t_out, status);
+}

@@ -1,0 +1,55 @@
+// march_common.glsl -- what the tet-marching ray caster's passes share: the per-tet
+// records (tetvr/marching.py) read with texelFetch, and each pixel's ray.
+//
+// Coordinate spaces: *_obj mesh coordinates relative to the mesh's bounding-box centre (as
+// the records), eye space as in common.glsl. Ray parameter t = eye depth along the view axis
+// (the ray's direction has eye z = -1), so the clipping range compares with t directly and
+// a segment's world length is (t1 - t0) * length(d).
+// Records: u_planes (RGBA32F) holds RECORD_TEXELS texels per tet, u_tets_per_row tets a row:
+// texels 0..3 the face planes (n, w), n . x_obj + w < 0 inside, n the outward unit normal;
+// texel 4 the scalar (g, c), s = g . x_obj + c. u_mates (RGBA32I), u_mates_width tets a
+// row: per face 4 * neighbour + its face there, -1 on the boundary.
+// Defines: PERSPECTIVE.
+
+#define RECORD_TEXELS 5
+#define STATUS_DONE 0.0
+#define STATUS_REENTER 1.0   // the ray left the mesh: look for the next entry (peel)
+
+uniform sampler2D u_planes;
+uniform isampler2D u_mates;
+uniform int u_tets_per_row;
+uniform int u_mates_width;
+uniform mat4 u_inv_view;    // eye -> obj
+uniform vec2 u_ray_scale;   // NDC -> eye x, y per unit depth (perspective) or eye x, y (parallel)
+uniform vec2 u_viewport;    // pixels
+uniform float u_near;
+uniform float u_far;
+
+vec4 face_plane(int tet, int k) {
+    return texelFetch(u_planes, ivec2((tet % u_tets_per_row) * RECORD_TEXELS + k, tet / u_tets_per_row), 0);
+}
+
+vec4 tet_scalar(int tet) {
+    return texelFetch(u_planes, ivec2((tet % u_tets_per_row) * RECORD_TEXELS + 4, tet / u_tets_per_row), 0);
+}
+
+ivec4 tet_mates(int tet) {
+    return texelFetch(u_mates, ivec2(tet % u_mates_width, tet / u_mates_width), 0);
+}
+
+// The ray through the centre of the pixel at window position xy, in obj space.
+void pixel_ray(vec2 xy, out vec3 o_obj, out vec3 d_obj) {
+    vec2 r = (xy / u_viewport * 2.0 - 1.0) * u_ray_scale;
+#if PERSPECTIVE
+    o_obj = u_inv_view[3].xyz;
+    d_obj = mat3(u_inv_view) * vec3(r, -1.0);
+#else
+    o_obj = (u_inv_view * vec4(r, 0.0, 1.0)).xyz;
+    d_obj = mat3(u_inv_view) * vec3(0.0, 0.0, -1.0);
+#endif
+}
+
+// Where the ray meets a plane (n, w); the ray must not be parallel to it.
+float plane_t(vec4 plane, vec3 o, vec3 d) {
+    return -(dot(plane.xyz, o) + plane.w) / dot(plane.xyz, d);
+}

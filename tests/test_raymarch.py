@@ -1,0 +1,163 @@
+"""The tet-marching ray caster (RenderSettings(method="raymarch")) against the exact reference.
+
+Tolerance: the same table as projected tetrahedra (its interpolation error is ~1e-4 on
+these scenes) and float32 geometry; no visibility-order error, since every ray is
+composited in the order it crosses the cells. Every comparison asserts the maximum
+per-pixel error -- an 8-bit step: a ray grazing a corner on the silhouette may miss a
+sliver the reference sees (2e-3 on one pixel here, as for projected tetrahedra) -- and
+PSNR.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import tetvr
+from tetvr import Camera, RenderSettings, TransferFunction, synthetic
+from tetvr.image import psnr
+from tetvr.method import choose
+from tetvr.reference import render_reference
+
+from .conftest import save_failure
+from .test_near_plane_fuzz import _random_cameras
+
+pytestmark = pytest.mark.gl
+
+MAX_ERROR = 1 / 255
+MIN_PSNR = 90.0
+
+
+@pytest.fixture(scope="module")
+def marcher():
+    with tetvr.Renderer(RenderSettings(method="raymarch")) as r:
+        yield r
+        with r.ctx:
+            assert r.ctx.error == "GL_NO_ERROR"
+
+
+def _tf(mesh: tetvr.TetMesh, units: float = 4.0) -> TransferFunction:
+    diag = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
+    lo, hi = mesh.scalar_range
+    if hi <= lo:
+        lo, hi = lo - 0.5, hi + 0.5
+    return TransferFunction.preset("viridis", (lo, hi), opacity=[(0.0, 0.2), (0.5, 0.6), (1.0, 0.9)],
+                                   unit_distance=diag / units)
+
+
+def _compare(r, name, mesh, camera, tf, size=(80, 80), max_error=MAX_ERROR):
+    got = r.render(mesh, camera, tf, size=size)
+    want = render_reference(mesh, camera, tf, size)
+    assert want[..., 3].max() > 0.1, f"{name}: the reference image is nearly empty"
+    assert np.all(np.isfinite(got))
+    err = np.abs(got.astype(np.float64) - want).max(axis=-1)
+    value = psnr(got, want)
+    if err.max() > max_error or np.count_nonzero(err > 1 / 255) or value < MIN_PSNR:
+        where = save_failure(f"raymarch_{name}", got, want)
+        pytest.fail(f"{name}: max error {err.max():.3g}, {np.count_nonzero(err > 1 / 255)} pixels beyond 1/255, "
+                    f"{value:.1f} dB (images in {where})")
+    return got, want
+
+
+def _separate_cubes() -> tetvr.TetMesh:
+    a, b = synthetic.cube(2), synthetic.cube(2)
+    return synthetic.merge(a, tetvr.TetMesh(b.points * 0.5 + np.array([1.6, 0.3, -0.8]), b.tets, b.scalars))
+
+
+SCENES = {
+    "single_tet": lambda: synthetic.single_tet((0.1, 0.4, 0.7, 1.0)),
+    "two_tets": synthetic.two_tets,
+    "cube": lambda: synthetic.cube(4),
+    "slab": synthetic.slab,
+    "torus": lambda: synthetic.torus(n_around=16),  # non-convex: rays leave and enter again
+    "rings": synthetic.interlocking_rings,  # interlocking parts: up to 4 entries per ray
+    "separate_parts": _separate_cubes,
+}
+
+
+@pytest.mark.parametrize("parallel", [False, True], ids=["perspective", "parallel"])
+@pytest.mark.parametrize("scene", sorted(SCENES))
+def test_scenes_against_the_reference(marcher, scene, parallel):
+    mesh = SCENES[scene]()
+    cam = Camera.fit(mesh, direction=(-0.3, -0.5, -1.0), parallel=parallel)
+    _compare(marcher, f"{scene}_{'parallel' if parallel else 'perspective'}", mesh, cam, _tf(mesh))
+
+
+def test_convex_mesh_needs_one_layer_and_rings_need_several(marcher):
+    cube = synthetic.cube(3)
+    marcher.render(cube, Camera.fit(cube, direction=(-0.3, -0.5, -1.0)), _tf(cube), size=(32, 32))
+    assert marcher._marcher.last_stats.layers == 1
+    rings = synthetic.interlocking_rings()
+    marcher.render(rings, Camera.fit(rings, direction=(-0.3, -0.5, -1.0)), _tf(rings), size=(32, 32))
+    assert marcher._marcher.last_stats.layers >= 2  # a ray through both rings enters twice or more
+    assert not marcher._marcher.last_stats.layers_exhausted
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_random_cameras_inside_and_around(marcher, seed):
+    """Eye inside the mesh, near plane cutting cells, parallel views: every ray that starts
+    inside the mesh starts in the cell holding its point on the near plane."""
+    mesh = synthetic.cube(3)
+    tf = _tf(mesh, units=5.0)
+    for i, cam in enumerate(_random_cameras(12, seed)):
+        got = marcher.render(mesh, cam, tf, size=(40, 40))
+        want = render_reference(mesh, cam, tf, (40, 40))
+        err = np.abs(got - want).max(axis=-1)
+        assert err.max() < MAX_ERROR, f"camera {i}: max error {err.max():.3g}"
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_far_plane_cuts_the_walk(marcher, parallel):
+    mesh = synthetic.cube(5)
+    cam = Camera.fit(mesh, direction=(-0.3, -0.2, -1.0), parallel=parallel)
+    near, far = cam.clipping_range
+    centre = float((np.asarray(cam.focal_point) - np.asarray(cam.position)) @ np.asarray(cam.direction))
+    cut = dataclasses.replace(cam, clipping_range=(near, centre))
+    got, _ = _compare(marcher, "far_plane", mesh, cut, _tf(mesh), size=(64, 64))
+    assert got[..., 3].sum() < 0.8 * marcher.render(mesh, cam, _tf(mesh), size=(64, 64))[..., 3].sum()
+
+
+def test_a_ray_through_many_cells_and_an_opaque_scene(marcher):
+    """A fine mesh (3,000 cells along some rays' paths) and an absorbing transfer
+    function, where the walk stops early once alpha is 1 to float precision."""
+    mesh = synthetic.cube(10)
+    tf = TransferFunction.preset("viridis", mesh.scalar_range, opacity=[(0.0, 1.0), (1.0, 1.0)], unit_distance=0.01)
+    got, want = _compare(marcher, "opaque", mesh, Camera.fit(mesh, direction=(-0.3, -0.5, -1.0)), tf, size=(48, 48))
+    assert want[..., 3].max() > 0.999
+
+
+def test_shuffled_cells_and_reoriented_tets_render_the_same(marcher):
+    mesh = synthetic.cube(3)
+    rng = np.random.default_rng(3)
+    perm = rng.permutation(mesh.n_tets)
+    tets = mesh.tets[perm][:, [1, 0, 2, 3]]  # and every tet's orientation flipped
+    shuffled = tetvr.TetMesh(mesh.points, tets, mesh.scalars)
+    cam = Camera.fit(mesh, direction=(-0.3, -0.5, -1.0))
+    a = marcher.render(mesh, cam, _tf(mesh), size=(48, 48))
+    b = marcher.render(shuffled, cam, _tf(mesh), size=(48, 48))
+    assert np.abs(a - b).max() < 1e-6
+    assert np.array_equal(a, marcher.render(mesh, cam, _tf(mesh), size=(48, 48)))  # deterministic
+
+
+def test_projected_and_raymarch_agree_where_both_are_exact():
+    mesh = synthetic.cube(4)
+    cam = Camera.fit(mesh, direction=(-0.3, -0.5, -1.0))
+    with tetvr.Renderer(RenderSettings(method="projected")) as p, tetvr.Renderer(RenderSettings(method="raymarch")) as r:
+        a = p.render(mesh, cam, _tf(mesh), size=(64, 64))
+        b = r.render(mesh, cam, _tf(mesh), size=(64, 64))
+        assert r._marcher is not None and p._marcher is None  # each took its own path
+    diff = np.abs(a - b).max(axis=-1)
+    assert diff.max() < 1 / 255  # pixels on the silhouette: coverage by different triangles
+    assert np.count_nonzero(diff > 5e-4) <= 4
+
+
+def test_method_setting():
+    with pytest.raises(ValueError, match="method must be one of"):
+        RenderSettings(method="marching")
+    assert choose(RenderSettings()) == "raymarch"
+    assert choose(RenderSettings(method="projected")) == "projected"
+    # Settings only projected tetrahedra implement keep them under "auto".
+    assert choose(RenderSettings(optics="vtk")) == "projected"
+    assert choose(RenderSettings(framebuffer="uint8")) == "projected"

@@ -1,0 +1,272 @@
+"""The tet-marching ray caster's GL side: records as textures, entry passes, march passes.
+
+Owned by a :class:`~tetvr.gl.renderer.Renderer` (its context, its table texture, its
+programs), chosen by ``RenderSettings(method="raymarch")``. Per mesh (once): the records of
+:func:`tetvr.marching.march_records` go to two textures read with ``texelFetch`` (on
+llvmpipe several times faster in the walk's loop than the same reads from a storage
+buffer) and the boundary faces to a vertex buffer. Per view, layer by layer:
+
+1. *entry* (``march_entry.*``): the boundary faces that face each ray -- and, in the first
+   layer, the cells the near plane cuts -- are rasterised; the depth test keeps each ray's
+   nearest entry at its exact ray parameter;
+2. *march* (``march.frag``): one full-screen pass walks every ray from its entry until it
+   leaves the mesh, reaches the far plane or turns opaque, compositing front to back.
+
+Where a ray left the mesh, the next layer's entry pass peels the boundary behind where it
+left (a non-convex mesh, or separate parts); an occlusion query says when no ray enters
+again. Convex meshes need one layer and one empty peel.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..camera import Camera
+from ..marching import RECORD_TEXELS, MarchRecords, folded_faces, march_records, near_plane_cells
+from ..mesh import TetMesh
+
+if TYPE_CHECKING:
+    from .renderer import Renderer
+
+__all__ = ["Marcher", "MarchStats"]
+
+#: Most entry layers per frame: a ray leaving and entering the mesh more often than this
+#: (a mesh of many separate shells seen edge-on) stops there; the count is in the stats.
+MAX_LAYERS = 64
+
+
+@dataclasses.dataclass(frozen=True)
+class MarchStats:
+    """Layers the last ray-cast frame needed (1 for a convex mesh) and whether rays were
+    cut off at :data:`MAX_LAYERS`."""
+
+    layers: int = 0
+    layers_exhausted: bool = False
+    n_near_cells: int = 0
+
+
+class Marcher:
+    """GL state of the tet-marching ray caster for one :class:`Renderer`."""
+
+    def __init__(self, owner: "Renderer") -> None:
+        self.owner = owner
+        self.ctx = owner.ctx
+        self._mesh: TetMesh | None = None
+        self._records: MarchRecords | None = None
+        self._textures: list[Any] = []  # planes, mates
+        self._faces: list[Any] = []  # boundary positions, slots
+        self._vaos: dict[Any, Any] = {}
+        self._targets: dict[tuple[int, int], dict[str, Any]] = {}
+        self._query: Any = None
+        self._tets_per_row = 1
+        self._mates_width = 1
+        self.last_stats = MarchStats()
+
+    # ---- ownership ----
+    def gl_objects(self) -> list[Any]:
+        objs = [*self._vaos.values(), *self._textures, *self._faces]
+        for t in self._targets.values():
+            objs += list(t.values())
+        return objs  # the occlusion query has no release in moderngl: it goes with the context
+
+    def forget(self) -> None:
+        self._vaos.clear()
+        self._textures, self._faces = [], []
+        self._targets.clear()
+        self._query = None
+        self._mesh = self._records = None
+
+    def gpu_bytes(self) -> int:
+        """Bytes held in the records, boundary buffers and targets."""
+        total = sum(b.size for b in self._faces)
+        textures = [*self._textures, *(tex for t in self._targets.values() for name, tex in t.items()
+                                       if "fbo" not in name)]
+        for tex in textures:
+            texel = 4 if tex.depth else tex.components * int(tex.dtype[1])
+            total += tex.width * tex.height * texel
+        return int(total)
+
+    # ---- per mesh ----
+    def _use_mesh(self, mesh: TetMesh) -> MarchRecords:
+        if mesh is self._mesh and self._records is not None:
+            return self._records
+        for obj in [*self._vaos.values(), *self._textures, *self._faces]:
+            obj.release()
+        self._vaos.clear()
+        rec = march_records(mesh)
+        folds = folded_faces(mesh)
+        if folds:
+            import warnings
+
+            warnings.warn(f"the mesh is tangled: {folds} interior faces have both their cells on one side (cells "
+                          f"overlap in space); tet marching follows faces and renders it wrong: use "
+                          f"method=\"projected\" (\"auto\" does)", RuntimeWarning, stacklevel=4)
+        max_tex = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
+        tets_per_row = max(1, min(max_tex // RECORD_TEXELS, 4096))
+        rows = -(-mesh.n_tets // tets_per_row)
+        mates_width = min(max_tex, 8192)
+        mates_rows = -(-mesh.n_tets // mates_width)
+        if rows > max_tex or mates_rows > max_tex:
+            raise MemoryError(f"the ray caster holds at most {tets_per_row * max_tex} tets in one texture on this GL "
+                              f"(GL_MAX_TEXTURE_SIZE {max_tex}); the mesh has {mesh.n_tets}: use "
+                              f"method=\"projected\" or split it into bricks (tetvr.cull.submesh)")
+        records = np.zeros((rows * tets_per_row, RECORD_TEXELS, 4), dtype=np.float32)
+        records[:mesh.n_tets, :4] = rec.planes
+        records[:mesh.n_tets, 4] = rec.scalar
+        planes = self.ctx.texture((tets_per_row * RECORD_TEXELS, rows), 4, records.tobytes(), dtype="f4")
+        mates = np.full((mates_rows * mates_width, 4), -1, dtype=np.int32)
+        mates[:mesh.n_tets] = rec.mates
+        mates_tex = self.ctx.texture((mates_width, mates_rows), 4, mates.tobytes(), dtype="i4")
+        for tex in (planes, mates_tex):
+            tex.filter = (self._nearest(), self._nearest())
+        self._textures = [planes, mates_tex]
+        pos = self.ctx.buffer(np.ascontiguousarray(rec.boundary_triangles, dtype=np.float32).tobytes())
+        slots = self.ctx.buffer(np.repeat(rec.boundary_slots.astype(np.int32), 3).tobytes())
+        self._faces = [pos, slots]
+        self._tets_per_row, self._mates_width = tets_per_row, mates_width
+        self._mesh, self._records = mesh, rec
+        return rec
+
+    def _nearest(self) -> int:
+        import moderngl
+
+        return moderngl.NEAREST
+
+    # ---- per size ----
+    def _target(self, size: tuple[int, int]) -> dict[str, Any]:
+        t = self._targets.get(size)
+        if t is not None:
+            return t
+        if len(self._targets) >= 2:
+            # Bind the default framebuffer first: deleting the bound one leaves GL pointing
+            # at a dead name (INVALID_OPERATION at the next framebuffer).
+            self.ctx.detect_framebuffer(0).use()
+            for old in self._targets.values():
+                for name in sorted(old, key=lambda n: "fbo" not in n):  # framebuffers first
+                    old[name].release()
+            self._targets.clear()
+        ctx = self.ctx
+        t = {"entry": ctx.texture(size, 1, dtype="i4"), "depth": ctx.depth_texture(size)}
+        t["depth"].compare_func = ""
+        t["entry_fbo"] = ctx.framebuffer(color_attachments=[t["entry"]], depth_attachment=t["depth"])
+        for side in "ab":
+            t[f"color_{side}"] = ctx.texture(size, 4, dtype="f4")
+            t[f"state_{side}"] = ctx.texture(size, 2, dtype="f4")
+            t[f"last_{side}"] = ctx.texture(size, 1, dtype="i4")
+            t[f"fbo_{side}"] = ctx.framebuffer(color_attachments=[t[f"color_{side}"], t[f"state_{side}"],
+                                                                  t[f"last_{side}"]])
+        for name, tex in t.items():
+            if "fbo" not in name:
+                tex.filter = (self._nearest(), self._nearest())
+        self._targets[size] = t
+        return t
+
+    # ---- the frame ----
+    def render(self, mesh: TetMesh, camera: Camera, size: tuple[int, int], uniforms: dict[str, Any],
+               table_uniforms: dict[str, Any], defines: dict[str, int], clock: Any) -> NDArray[np.float32]:
+        import moderngl
+
+        ctx = self.ctx
+        rec = self._use_mesh(mesh)
+        clock.lap("upload")
+        perspective = int(not camera.parallel_projection)
+        view = np.asarray(uniforms["u_view"], dtype=np.float64)
+        common = dict(u_view=view, u_proj=uniforms["u_proj"], u_inv_view=np.linalg.inv(view),
+                      u_ray_scale=uniforms["u_ray_scale"], u_viewport=(float(size[0]), float(size[1])),
+                      u_near=uniforms["u_near"], u_far=uniforms["u_far"], u_tets_per_row=self._tets_per_row,
+                      u_mates_width=self._mates_width, u_planes=1, u_mates=2,
+                      u_tolerance=1e-6 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])))
+        t = self._target(size)
+        self._textures[0].use(1)
+        self._textures[1].use(2)
+        ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
+
+        # Layer 1: boundary faces and the cells the near plane cuts.
+        near_ids, rects = near_plane_cells(mesh, camera, size[0] / size[1])
+        t["entry_fbo"].use()
+        t["entry_fbo"].clear(depth=1.0)
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.depth_func = "<"
+        face_prog = self.owner._program("march_entry", PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=0)
+        self._set(face_prog, common)
+        self._faces_vao(face_prog).render(moderngl.TRIANGLES)
+        near_buffers: list[Any] = []
+        if near_ids.size:
+            near_prog = self.owner._program("march_entry", PERSPECTIVE=perspective, NEAR_CELLS=1, PEEL=0)
+            self._set(near_prog, common)
+            corners = rects[:, [[0, 1], [2, 1], [2, 3], [0, 1], [2, 3], [0, 3]]].astype(np.float32)  # (n, 6, 2)
+            near_buffers = [ctx.buffer(corners.tobytes()),
+                            ctx.buffer(np.repeat(near_ids.astype(np.int32), 6).tobytes())]
+            vao = ctx.vertex_array(near_prog, [(near_buffers[0], "2f", "in_pos"), (near_buffers[1], "1i", "in_id")])
+            vao.render(moderngl.TRIANGLES)
+            vao.release()
+        for b in near_buffers:
+            b.release()
+        ctx.disable(moderngl.DEPTH_TEST)
+        clock.lap("entry")
+
+        march_defines = dict(defines, PERSPECTIVE=perspective)
+        samplers = dict(u_entry_depth=3, u_entry=4, u_color_in=5, u_state_in=6, u_last_in=7, u_state=5, u_last=7)
+        steps = dict(u_max_steps=int(min(mesh.n_tets + 1, 1 << 30)), u_opaque=1.0 - 2.0 ** -20)
+        src, dst = "b", "a"
+        layers, exhausted = 0, False
+        for layer in range(MAX_LAYERS):
+            march = self.owner._program("march", **march_defines, FIRST=int(layer == 0))
+            self._set(march, {**common, **table_uniforms, **samplers, **steps})
+            t["depth"].use(3)
+            t["entry"].use(4)
+            t[f"color_{src}"].use(5)
+            t[f"state_{src}"].use(6)
+            t[f"last_{src}"].use(7)
+            t[f"fbo_{dst}"].use()
+            self._fullscreen(march)
+            layers += 1
+            src, dst = dst, src
+            clock.lap("march")
+            # Peel: the next entry behind where each ray left the mesh, if any ray did.
+            peel = self.owner._program("march_entry", PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=1)
+            self._set(peel, {**common, **samplers})
+            t[f"state_{src}"].use(5)
+            t[f"last_{src}"].use(7)
+            t["entry_fbo"].use()
+            t["entry_fbo"].clear(depth=1.0)
+            ctx.enable(moderngl.DEPTH_TEST)
+            if self._query is None:
+                self._query = ctx.query(samples=True)
+            with self._query:
+                self._faces_vao(peel).render(moderngl.TRIANGLES)
+            ctx.disable(moderngl.DEPTH_TEST)
+            clock.lap("entry")
+            if self._query.samples == 0:
+                break
+        else:
+            exhausted = True
+        self.last_stats = MarchStats(layers=layers, layers_exhausted=exhausted, n_near_cells=int(near_ids.size))
+        raw = t[f"color_{src}"].read()
+        clock.lap("readback")
+        return np.frombuffer(raw, dtype=np.float32).reshape(size[1], size[0], 4)[::-1].copy()
+
+    def _set(self, prog: Any, uniforms: dict[str, Any]) -> None:
+        from .util import set_uniforms
+
+        set_uniforms(prog, **uniforms)
+
+    def _faces_vao(self, prog: Any) -> Any:
+        vao = self._vaos.get(id(prog))
+        if vao is None:
+            vao = self._vaos[id(prog)] = self.ctx.vertex_array(
+                prog, [(self._faces[0], "3f", "in_pos"), (self._faces[1], "1i", "in_id")])
+        return vao
+
+    def _fullscreen(self, prog: Any) -> None:
+        import moderngl
+
+        key = ("fullscreen", id(prog))
+        vao = self._vaos.get(key)
+        if vao is None:
+            vao = self._vaos[key] = self.ctx.vertex_array(prog, [])
+        vao.render(moderngl.TRIANGLES, vertices=3)

@@ -1,0 +1,173 @@
+"""Per-tet records and ray entry points for the tet-marching ray caster (CPU stage).
+
+About this technique
+--------------------
+Tet marching (Garrity 1990; on the GPU, Weiler et al. 2003, "Hardware-based ray casting
+for tetrahedral meshes") follows each pixel's ray from cell to cell through shared faces:
+in the tet it is in, the ray leaves by the nearest of the faces it points out of, and the
+neighbour across that face is the next cell. Each tet contributes one exact segment,
+integrated by a lookup in the same pre-integration table as projected tetrahedra
+(Kraus et al. 2004), composited front to back in traversal order: there is no sort and
+no visibility error, and the cost follows the ray--tet segments, not the tets.
+
+The GPU needs, per tet, what the walk reads at every step (built here once per mesh):
+
+* the four face planes, outward unit normal ``n`` and ``w`` with ``n . x + w = 0`` on the
+  face (``x`` relative to the mesh's bounding-box centre, as the GPU's points are);
+* the scalar as an affine function ``s(x) = g . x + c`` (point data is linear in a tet, so
+  the scalar leaving one tet is the scalar entering the next: it is carried along);
+* each face's mate: ``4 * neighbour + k`` for the neighbour's face ``k`` that is the same
+  face, or -1 on the boundary (the ray leaves the mesh there).
+
+Rays enter the mesh at front-facing boundary faces; where the mesh is not convex a ray may
+leave and enter again, and each further entry is found by peeling the boundary at the
+last exit (:mod:`tetvr.gl.raymarch`). Rays that start inside the mesh -- the eye inside,
+the near plane cutting cells -- start in the tet that holds the ray's point on the near
+plane: :func:`near_plane_cells` lists the tets the near plane cuts and where they project.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .adjacency import FACE_VERTICES, face_adjacency
+from .camera import Camera
+from .mesh import TetMesh
+
+__all__ = ["MarchRecords", "march_records", "near_plane_cells", "folded_faces", "RECORD_TEXELS"]
+
+#: Texels of one tet's record in the float texture: four face planes, then the scalar.
+RECORD_TEXELS = 5
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class MarchRecords:
+    """What the walk reads per tet (see the module docstring).
+
+    Attributes
+    ----------
+    planes : (m, 4, 4) float32, face ``k`` of tet ``t``: ``(n, w)`` with ``n . x + w``
+        negative inside (``x`` relative to ``origin``).
+    scalar : (m, 4) float32, ``(g, c)`` with ``s(x) = g . x + c``.
+    mates : (m, 4) int32, ``4 * neighbour + k`` across each face, -1 on the boundary.
+    boundary_slots : (F,) int64, ``4 * t + k`` of each boundary face.
+    boundary_triangles : (F, 3, 3) float32, the boundary faces' corners (relative to
+        ``origin``).
+    origin : (3,) float64, the mesh's bounding-box centre.
+    convex : the mesh fills a convex region (no ray enters twice).
+    """
+
+    planes: NDArray[np.float32]
+    scalar: NDArray[np.float32]
+    mates: NDArray[np.int32]
+    boundary_slots: NDArray[np.int64]
+    boundary_triangles: NDArray[np.float32]
+    origin: NDArray[np.float64]
+    convex: bool
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.planes.nbytes + self.scalar.nbytes + self.mates.nbytes + self.boundary_triangles.nbytes)
+
+
+def march_records(mesh: TetMesh) -> MarchRecords:
+    """The per-tet records and boundary faces of ``mesh`` (the face adjacency is cached
+    with the mesh's geometry, :func:`tetvr.adjacency.face_adjacency`).
+
+    Examples
+    --------
+    >>> from tetvr import synthetic
+    >>> rec = march_records(synthetic.two_tets())
+    >>> rec.planes.shape, rec.mates.tolist()
+    ((2, 4, 4), [[-1, -1, -1, 6], [-1, -1, 3, -1]])
+    """
+    adj = face_adjacency(mesh)
+    origin = np.asarray(adj.origin, dtype=np.float64)
+    planes = np.empty((mesh.n_tets, 4, 4), dtype=np.float32)
+    planes[..., :3] = adj.normals
+    planes[..., 3] = -adj.offsets
+    rel = mesh.points - origin
+    tets = np.asarray(mesh.tets, dtype=np.intp)
+    p0 = rel[tets[:, 0]]
+    edges = rel[tets[:, 1:]] - p0[:, None, :]  # (m, 3, 3), rows p_k - p_0
+    ds = mesh.scalars[tets[:, 1:]] - mesh.scalars[tets[:, :1]]  # (m, 3)
+    # Zero-volume tets are dropped on reading, so every edge matrix is invertible.
+    grad = np.linalg.solve(edges, ds[..., None])[..., 0]
+    scalar = np.empty((mesh.n_tets, 4), dtype=np.float32)
+    scalar[:, :3] = grad
+    scalar[:, 3] = mesh.scalars[tets[:, 0]] - np.einsum("ij,ij->i", grad, p0)
+    slots = np.asarray(adj.boundary_slots, dtype=np.int64)
+    corners = tets[slots // 4][np.arange(slots.shape[0])[:, None], FACE_VERTICES[slots % 4]]
+    return MarchRecords(planes=planes, scalar=scalar, mates=np.ascontiguousarray(adj.mates, dtype=np.int32),
+                        boundary_slots=slots, boundary_triangles=rel[corners].astype(np.float32), origin=origin,
+                        convex=bool(adj.convex))
+
+
+def folded_faces(mesh: TetMesh) -> int:
+    """How many interior faces are folded: the two tets sharing the face lie on the same
+    side of it (a tangled mesh, e.g. inverted elements, whose cells overlap in space).
+
+    A ray walking through a folded face goes into a cell that does not continue the ray's
+    path, so tet marching cannot render such a mesh; projected tetrahedra draw every cell
+    and integrate the overlaps as the reference does. Cached with the face adjacency.
+
+    Examples
+    --------
+    >>> from tetvr import synthetic
+    >>> folded_faces(synthetic.cube(3))
+    0
+    """
+    adj = face_adjacency(mesh)
+    cached = _FOLDS.get(id(adj))
+    if cached is not None and cached[0] is adj:
+        return cached[1]
+    t, k = np.nonzero(adj.mates >= 0)
+    mate = adj.mates[t, k]
+    other = mesh.points[mesh.tets[mate // 4, mate % 4]] - adj.origin  # the mate's vertex off the face
+    side = np.einsum("ij,ij->i", adj.normals[t, k], other) - adj.offsets[t, k]
+    # Outward from t, so the mate's far vertex must be ahead of the plane; allow rounding.
+    n = int(np.count_nonzero(side <= -1e-12 * adj.radius)) // 2
+    _FOLDS.clear()
+    _FOLDS[id(adj)] = (adj, n)
+    return n
+
+
+_FOLDS: dict[int, tuple[object, int]] = {}
+
+
+def near_plane_cells(mesh: TetMesh, camera: Camera, aspect: float) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """The tets the near plane cuts, and the NDC rectangle their cut projects to.
+
+    Returns ``(ids, rects)``: ``rects[i] = (x_lo, y_lo, x_hi, y_hi)`` bounds the polygon
+    where tet ``ids[i]`` meets the near plane (clamped to the viewport). A ray's point on
+    the near plane lies in one of these tets exactly when the ray starts inside the mesh.
+    """
+    near = camera.clipping_range[0]
+    view = camera.view_matrix()
+    depth = -(mesh.points @ view[2, :3] + view[2, 3])
+    if not depth.min() < near <= depth.max():
+        return np.empty(0, dtype=np.int64), np.empty((0, 4))
+    d = depth[mesh.tets]
+    ids = np.flatnonzero((d.min(axis=1) < near) & (d.max(axis=1) >= near))
+    if ids.size == 0:
+        return ids.astype(np.int64), np.empty((0, 4))
+    eye = mesh.points[mesh.tets[ids]] @ view[:3, :3].T + view[:3, 3]  # (n, 4, 3)
+    dd = d[ids] - near
+    proj = camera.projection_matrix(aspect)
+    lo = np.full((ids.size, 2), np.inf)
+    hi = np.full((ids.size, 2), -np.inf)
+    for a in range(4):
+        for b in range(a + 1, 4):
+            cross = (dd[:, a] < 0) != (dd[:, b] < 0)
+            f = np.where(cross, dd[:, a] / np.where(cross, dd[:, a] - dd[:, b], 1.0), 0.0)
+            q = eye[:, a] + f[:, None] * (eye[:, b] - eye[:, a])  # on the near plane
+            clip = q @ proj[:, :3].T + proj[:, 3]
+            with np.errstate(divide="ignore", invalid="ignore"):  # rows without a crossing
+                ndc = clip[:, :2] / np.where(cross, clip[:, 3], 1.0)[:, None]
+            lo = np.where(cross[:, None], np.minimum(lo, ndc), lo)
+            hi = np.where(cross[:, None], np.maximum(hi, ndc), hi)
+    rects = np.clip(np.concatenate([lo, hi], axis=1), -1.0, 1.0)
+    return ids.astype(np.int64), rects
