@@ -60,6 +60,9 @@ SWEEP_MAX_ENTRIES = 1024 * 1024 * 16
 
 def variants() -> dict[str, RenderSettings]:
     v = {"default": DEFAULT}
+    # The two GPU methods ("auto" is the ray caster where both apply; bench/README.md).
+    v["projected tetrahedra"] = dataclasses.replace(DEFAULT, method="projected")
+    v["tet marching"] = dataclasses.replace(DEFAULT, method="raymarch")
     v["screen-linear interpolation"] = dataclasses.replace(DEFAULT, perspective_correct=False)
     v["premultiplied table"] = dataclasses.replace(DEFAULT, table_encoding="premultiplied")
     v["uint8 table"] = dataclasses.replace(DEFAULT, table_dtype="uint8")
@@ -76,7 +79,7 @@ def variants() -> dict[str, RenderSettings]:
         v[f"K={k}, base {base}"] = dataclasses.replace(DEFAULT, table_thickness_slices=k, table_log_base=base)
     for method in SORTERS:
         if method not in (DEFAULT.sort, "auto") and method in SORT_METHODS:
-            v[f"sort={method}"] = dataclasses.replace(DEFAULT, sort=method)
+            v[f"sort={method}"] = dataclasses.replace(DEFAULT, sort=method, method="projected")
     v["premultiplied, uint8, screen-linear (VTK-like)"] = dataclasses.replace(
         DEFAULT, table_encoding="premultiplied", table_dtype="uint8", perspective_correct=False, framebuffer="uint8")
     return v
@@ -153,7 +156,9 @@ def resolved(s: RenderSettings, mesh, tf) -> RenderSettings:
     # Aligned nodes that land where uniform ones do are the same table.
     rng = table_scalar_range(mesh.scalar_range, tf)
     align = s.table_align_nodes and aligned_scalar_range(rng, tf, size.n_bins) != rng
-    return dataclasses.replace(s, sort=auto_method(mesh) if s.sort == "auto" else s.sort,
+    from tetvr.method import choose
+
+    return dataclasses.replace(s, method=choose(s, mesh), sort=auto_method(mesh) if s.sort == "auto" else s.sort,
                                table_scalar_bins=size.n_bins, table_thickness_slices=size.n_slices,
                                table_log_base=round(size.log_base, 9), table_tolerance=1.0, table_align_nodes=align)
 
@@ -164,7 +169,7 @@ def same_as_default(vs: dict[str, RenderSettings], mesh, tf) -> dict[str, str]:
     where the auto size is 512 bins): timing them again only adds noise, and one of two
     identical settings would "beat" the other by chance."""
     mine = resolved(DEFAULT, mesh, tf)
-    why = (f"identical to the default here (sort=auto picks {mine.sort}; the auto table is "
+    why = (f"identical to the default here (method=auto picks {mine.method}, sort=auto {mine.sort}; the auto table is "
            f"N={mine.table_scalar_bins}, K={mine.table_thickness_slices})")
     return {key: why for key, s in vs.items() if key != "default" and resolved(s, mesh, tf) == mine}
 

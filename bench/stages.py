@@ -74,8 +74,10 @@ MAX_REPEATS = 60
 #: Meshes above this many tets get fewer repeats (a 1M-tet frame takes seconds on llvmpipe).
 BIG_TETS = 500_000
 BIG_REPEATS = 3
-#: The renderer's defaults, with the sort pinned to the one the targets are about.
-SETTINGS = RenderSettings(sort="centroid")
+#: Projected tetrahedra's stages, with the sort pinned to the one the targets are about.
+SETTINGS = RenderSettings(sort="centroid", method="projected")
+#: The tet-marching ray caster, timed on the same meshes and views (``raymarch`` in the JSON).
+MARCH_SETTINGS = RenderSettings(method="raymarch")
 TABLE_BINS = (128, 256, 512)
 TABLE_SLICES = 16
 TABLE_REPEATS = 3
@@ -212,6 +214,43 @@ def bench_mesh(renderer: Any, name: str, mesh: TetMesh, repeats: int, bar: tqdm)
     return rec
 
 
+def bench_raymarch(renderer: Any, mesh: TetMesh, repeats: int) -> dict[str, Any]:
+    """The ray caster on the same mesh and view: first frame (records and boundary faces),
+    per-view stages (entry passes, march passes, readback), and the cost per segment."""
+    cam = Camera.fit(mesh)
+    tf = default_transfer_function(mesh, opacity=OPACITY)
+    renderer.profile = True
+    t0 = time.perf_counter()
+    renderer.render(mesh, cam, tf, size=SIZE)
+    rec: dict[str, Any] = {"first_frame": {"wall": time.perf_counter() - t0,
+                                           "upload": float(renderer.last_stats.upload),
+                                           "table": float(renderer.last_stats.table)}}
+    rows: list[dict[str, float]] = []
+    walls: list[float] = []
+    for _ in range(repeats):
+        renderer.profile = True
+        c0 = time.process_time()
+        renderer.render(mesh, cam, tf, size=SIZE)
+        st = renderer.last_stats
+        rows.append({"entry": st.entry, "march": st.march, "readback": st.readback,
+                     "total": st.entry + st.march + st.readback, "cpu": time.process_time() - c0})
+        renderer.profile = False
+        t0 = time.perf_counter()
+        renderer.render(mesh, cam, tf, size=SIZE)
+        walls.append(time.perf_counter() - t0)
+    rec["median"] = {k: _median([r[k] for r in rows]) for k in rows[0]}
+    rec["wall_median"] = _median(walls)
+    rec["layers"] = renderer._marcher.last_stats.layers
+    counts = renderer.segment_counts(mesh, cam, size=SIZE)
+    rec["segments"] = int(counts.sum())
+    rec["segments_per_covered_pixel"] = float(counts[counts > 0].mean()) if counts.any() else 0.0
+    rec["segments_per_tet"] = rec["segments"] / mesh.n_tets
+    rec["ns_per_segment"] = {"march_wall": rec["median"]["march"] / max(rec["segments"], 1) * 1e9,
+                             "frame_cpu": rec["median"]["cpu"] / max(rec["segments"], 1) * 1e9}
+    rec["samples"] = {"rows": rows, "wall": walls}
+    return rec
+
+
 def bench_tables(repeats: int, bar: tqdm) -> dict[str, Any]:
     mesh = synthetic.cube(12)
     tf = default_transfer_function(mesh, opacity=OPACITY)
@@ -289,6 +328,17 @@ def print_table(res: dict[str, Any]) -> None:
                   f"{_ms(md['readback']):>7}{_ms(md['total']):>8} | {_ms(fl['total']):>7}{r['draw']:>8.2f}"
                   f"{r['total']:>7.2f}{m['ratio_paired']['cpu']:>7.2f}{_ms(m['geometry_floor_draw']):>7} | "
                   f"{_ms(m['wall_median']['tet_unprofiled']):>7}{m['cpu_utilisation']['tet']:>5.1f}")
+    marched = [m for m in meshes if "raymarch" in m]
+    if marched:
+        print(f"\ntet-marching ray caster at {SIZE[0]}x{SIZE[1]}, ms: entry, march, readback, wall (unprofiled); "
+              "segments per covered pixel; ns per segment (march wall, frame CPU); projected wall / ray caster wall")
+        for m in marched:
+            rm = m["raymarch"]
+            md = rm["median"]
+            print(f"{m['name']:<20}{m['n_tets']:>9} | {_ms(md['entry']):>7}{_ms(md['march']):>8}{_ms(md['readback']):>7}"
+                  f"{_ms(rm['wall_median']):>8} | {rm['segments_per_covered_pixel']:>6.1f} | "
+                  f"{rm['ns_per_segment']['march_wall']:>6.1f}{rm['ns_per_segment']['frame_cpu']:>7.1f} | "
+                  f"{rm['speedup_vs_projected']:>5.2f}x")
     tab = res.get("table")
     if tab:
         cells = ", ".join(f"{k}: {v['median']:.3f} s (cpu {v['cpu_median']:.3f})" for k, v in tab["by_bins"].items())
@@ -472,6 +522,10 @@ def main(argv: list[str] | None = None) -> int:
                                 "rasterises on all cores, so 1..cores when nothing competes; well below 1: contended"),
             "cpu_median": "table and sort: median process CPU seconds (both run on one thread)",
             "geometry_floor_draw": f"draw stage of the floor shader at {GEOMETRY_SIZE}: the non-fill part of draw",
+            "raymarch": ("the tet-marching ray caster (method='raymarch') on the same mesh and view: stage medians "
+                         "(entry: boundary passes; march: the walks), wall_median without profiling, segments: "
+                         "ray-tet segments walked per frame, ns_per_segment: march time (and frame CPU time) "
+                         "per segment; speedup_vs_projected: projected wall / ray caster wall"),
         },
     }
     n_frames = sum(3 + 4 * (min(repeats, BIG_REPEATS) if t > BIG_TETS else repeats) for _, t, _ in specs)
@@ -480,7 +534,7 @@ def main(argv: list[str] | None = None) -> int:
     status = 0
     bar = tqdm(total=total_work, unit="step", dynamic_ncols=True, file=sys.stderr)
     try:
-        with Renderer(SETTINGS, profile=True) as renderer:
+        with Renderer(SETTINGS, profile=True) as renderer, Renderer(MARCH_SETTINGS, profile=True) as marcher:
             res["gl"] = dict(renderer.gl_info)
             # Compile every program once on a tiny mesh so no mesh's first frame pays for it.
             t0 = time.perf_counter()
@@ -505,6 +559,10 @@ def main(argv: list[str] | None = None) -> int:
                 bar.set_description(f"{name} {_label(mesh.n_tets)}")
                 rec = bench_mesh(renderer, name, mesh, r, bar)
                 rec["load_s"] = load_s
+                bar.set_description(f"{name} ray caster")
+                rec["raymarch"] = bench_raymarch(marcher, mesh, r)
+                rec["raymarch"]["speedup_vs_projected"] = (rec["wall_median"]["tet_unprofiled"]
+                                                           / rec["raymarch"]["wall_median"])
                 res["meshes"].append(rec)
                 res["targets"] = evaluate_targets(res)
                 write_json(json_path, res)

@@ -2,19 +2,19 @@
 //
 // For the tets whose fan cannot be trusted (classify.comp): those crossing the near plane,
 // those with a vertex projecting far outside the viewport, and those with a fan triangle
-// too thin for the rasteriser. Needs common.glsl (Points, Tets, u_view, u_near, u_far) and
-// the PERSPECTIVE define.
+// too thin for the rasteriser. Needs common.glsl (mesh_point, mesh_tet, u_view, u_near,
+// u_far) and the PERSPECTIVE define.
 // In:  the tet id, the pixel's ray (tet.vert's v_ray: eye x, y per unit depth in
 //      perspective, eye x, y in parallel projection).
 // Out: (t0, t1, s0, s1): the eye depths where the ray enters and leaves the tet, clipped to
 //      the clipping range, and the scalars there; t1 <= t0 where the ray misses it.
 
 vec4 exact_ray_segment(int tet, vec2 ray) {
-    ivec4 id = tets[tet];
+    ivec4 id = mesh_tet(tet);
     vec3 p[4];
     float s[4];
     for (int k = 0; k < 4; ++k) {
-        vec4 q = points[id[k]];
+        vec4 q = mesh_point(id[k]);
         p[k] = (u_view * vec4(q.xyz, 1.0)).xyz;
         s[k] = q.w;
     }

@@ -9,6 +9,9 @@
 // Out: f_color premultiplied RGBA so far; f_state = (t where the walk stopped, status:
 //      STATUS_REENTER if the ray left the mesh and may enter again, else STATUS_DONE);
 //      f_last the entry this pass started from (the next peel skips it).
+// Defines: FIRST (the first layer), EXTENT 1 (instead of colour, f_color = (eye depth of
+// the first entry, of the last exit, segments walked, 0): the ray limits for fusion with a
+// volume, and the segment count the benchmarks divide by; no table lookups).
 // The walk leaves each tet by the nearest of the three faces other than the one it came in
 // by whose plane the ray points out of; the scalar is carried from face to face (it is
 // continuous: point data is linear in each tet), so each step reads three planes, the
@@ -34,7 +37,11 @@ layout(location = 2) out int f_last;
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
 #if FIRST
+#if EXTENT
+    vec4 acc = vec4(3.0e38, -3.0e38, 0.0, 0.0);
+#else
     vec4 acc = vec4(0.0);
+#endif
     f_last = -1;
     f_state = vec2(0.0, STATUS_DONE);
 #else
@@ -68,6 +75,9 @@ void main() {
     }
     vec4 g = tet_scalar(tet);
     float s_in = dot(g.xyz, o + t_in * d) + g.w;
+#if EXTENT
+    acc.x = min(acc.x, t_in);
+#endif
     float status = STATUS_DONE;
     float t_out = t_in;
     for (int step = 0; step < u_max_steps; ++step) {
@@ -87,8 +97,14 @@ void main() {
         bool at_far = t_out >= u_far;
         if (at_far) t_out = u_far;
         float s_out = dot(g.xyz, o + t_out * d) + g.w;
+#if EXTENT
+        acc.y = max(acc.y, t_out);
+        acc.z += 1.0;
+        if (at_far) break;
+#else
         acc += (1.0 - acc.a) * lookup_segment(s_in, s_out, (t_out - t_in) * per_t);
         if (at_far || acc.a >= u_opaque) break;
+#endif
         int mate = tet_mates(tet)[exit_face];
         if (mate < 0) {
             status = STATUS_REENTER;

@@ -68,5 +68,9 @@ void main() {
     }
 #endif
     // Rounding can order a flat segment's ends the wrong way: its length is 0, not negative.
-    f_color = lookup_table(vec2(sf, sb), max(zb - zf, 0.0) * per_depth);
+    float d = max(zb - zf, 0.0) * per_depth;
+    // An edge along the ray (a fan triangle of almost zero area) can extrapolate 1/w through
+    // zero: the segment is then not finite, and the fragment is dropped rather than NaN.
+    if (!(d < 3.0e38) || isnan(sf + sb)) discard;
+    f_color = lookup_table(vec2(sf, sb), d);
 }

@@ -84,8 +84,8 @@ def test_gpu_bytes_counts_what_the_renderer_holds():
     table = 5 * 32 * 32 * 16
     with Renderer(RenderSettings(table_scalar_bins=32, table_thickness_slices=4, method="projected")) as r:
         r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(16, 8))
-        # points, tets + fans + order + fan indices (12 uint32 per tet), table, target
-        expected = (mesh.n_points * 16 + mesh.n_tets * (16 + 48 + 4 + 48) + table + 16 * 8 * 16)
+        # points, tets + fan vertices (5 x 32 B) + order + fan indices (12 uint32 per tet), table, target
+        expected = (mesh.n_points * 16 + mesh.n_tets * (16 + 160 + 4 + 48) + table + 16 * 8 * 16)
         assert r.gpu_bytes() == expected
     with Renderer(RenderSettings(table_scalar_bins=32, table_thickness_slices=4, method="raymarch")) as r:
         r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(16, 8))

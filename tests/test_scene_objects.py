@@ -98,15 +98,19 @@ def test_camera_frame_and_validation():
             Camera(**kw)
 
 
-def test_bounding_sphere_is_the_one_fit_frames():
+def test_bounding_sphere_and_where_fit_looks():
     from tetvr.camera import bounding_sphere
 
     mesh = synthetic.cube(2)
     centre, radius = bounding_sphere(mesh.bounds)
     np.testing.assert_array_equal(centre, 0.5 * (mesh.bounds[0] + mesh.bounds[1]))
     assert radius == pytest.approx(0.5 * np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
+    # fit frames the projected extent (tests/test_defaults.py): its focal point is the
+    # extent's centre, on the plane through the bounding sphere's centre across the view.
     cam = Camera.fit(mesh)
-    assert cam.focal_point == tuple(centre) and cam.parallel_scale == radius
+    offset = np.subtract(cam.focal_point, centre)
+    assert abs(offset @ np.asarray(cam.direction)) < 1e-12 and np.linalg.norm(offset) < 0.1 * radius
+    assert cam.parallel_scale == radius
     assert bounding_sphere([(1, 2, 3), (1, 2, 3)])[1] == 1e-30  # a point still has a radius
 
 

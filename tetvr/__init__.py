@@ -4,9 +4,10 @@ The pipeline, one module per stage: :mod:`~tetvr.mesh` -> classification (GPU,
 ``shaders/classify.comp``) -> :mod:`~tetvr.sort` -> :mod:`~tetvr.preintegrate` ->
 rasterisation (:mod:`tetvr.gl`) -> image. :mod:`~tetvr.reference` is the exact CPU
 renderer every image is measured against. Nothing here imports OpenGL until a GPU
-renderer is made.
+renderer is made. :func:`plot` renders and labels a picture in one call (:mod:`~tetvr.annotate`).
 """
 
+from .annotate import Picture, plot
 from .camera import Camera
 from .image import psnr, rmse, write_png
 from .mesh import MeshReport, TetMesh, read
@@ -22,6 +23,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Camera",
+    "Picture",
     "MeshReport",
     "PRESETS",
     "RenderSettings",
@@ -38,6 +40,7 @@ __all__ = [
     "Scene",
     "demo_scene_path",
     "load_scene",
+    "plot",
     "psnr",
     "read",
     "render",

@@ -137,38 +137,21 @@ class Camera:
     ) -> "Camera":
         """A camera looking along ``direction`` at the mesh, which fills the view.
 
-        The bounding sphere of the mesh touches the view's shorter side (divided by ``zoom``).
+        The mesh's projected extent (its points as this camera sees them, perspective
+        included) fills the view's height, or its width in a square view, whichever is
+        tighter, less a 4 % margin; ``zoom`` magnifies about the centre of that extent.
+        The focal point is the centre of the extent (on the plane through the centre of
+        the bounding box), so the mesh sits in the middle of the picture.
+
+        Examples
+        --------
+        >>> from tetvr import synthetic
+        >>> cam = Camera.fit(synthetic.cube(2, rotate=False), direction=(0, 0, -1), parallel=True)
+        >>> round(cam.parallel_scale, 3)  # half the cube's side, plus the margin
+        0.521
         """
-        centre, radius = bounding_sphere(mesh.bounds)
-        d = np.asarray(_vec3(direction, "direction"))
-        if not np.linalg.norm(d) > 0:
-            raise ValueError("direction must not be the zero vector")
-        d = d / np.linalg.norm(d)
-        up = np.asarray(_vec3(view_up, "view_up"))
-        if not np.linalg.norm(up) > 0:
-            raise ValueError("view_up must not be the zero vector")
-        view_angle = _real(view_angle, "view_angle")
-        if not 0.0 < view_angle < 180.0:
-            raise ValueError(f"view_angle must be in (0, 180) degrees, got {view_angle!r}")
-        zoom = _real(zoom, "zoom")
-        if not zoom > 0:
-            raise ValueError(f"zoom must be positive, got {zoom!r}")
-        if np.linalg.norm(np.cross(d, up)) < 1e-6 * np.linalg.norm(up):
-            up = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
-        half = math.radians(view_angle) / 2
-        dist = radius / math.sin(half) / zoom
-        pos = centre - d * dist
-        near = max(dist - radius * 1.05, dist * 1e-3)
-        far = dist + radius * 1.05
-        return cls(
-            position=tuple(pos),  # type: ignore[arg-type]
-            focal_point=tuple(centre),  # type: ignore[arg-type]
-            view_up=tuple(up),  # type: ignore[arg-type]
-            view_angle=view_angle,
-            parallel_projection=parallel,
-            parallel_scale=radius / zoom,
-            clipping_range=(near, far),
-        )
+        return _fit(mesh, direction=direction, view_up=view_up, view_angle=view_angle, parallel=parallel,
+                    zoom=zoom, aspect=1.0)
 
     def to_dict(self) -> dict[str, Any]:
         return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v) for f in dataclasses.fields(self)}
@@ -246,3 +229,161 @@ class Camera:
             dirs = (xx.reshape(-1, 1) * t * aspect) * r + (yy.reshape(-1, 1) * t) * u - b
             origins = np.broadcast_to(pos, dirs.shape).copy()
         return origins, dirs
+
+
+#: Fraction of the view's half-height between the mesh's projected extent and the edge.
+_FIT_MARGIN = 0.04
+
+
+def _fit(mesh: Any, *, direction: Any = (-1.0, -0.6, -1.2), view_up: Any = (0.0, 1.0, 0.0),
+         view_angle: float = 30.0, parallel: bool = False, zoom: float = 1.0, aspect: float = 1.0) -> Camera:
+    """:meth:`Camera.fit` for an image of width/height ``aspect`` (``fit`` assumes a
+    square one, which frames the mesh in any landscape image too)."""
+    centre, radius = bounding_sphere(mesh.bounds)
+    d = np.asarray(_vec3(direction, "direction"))
+    if not np.linalg.norm(d) > 0:
+        raise ValueError("direction must not be the zero vector")
+    d = d / np.linalg.norm(d)
+    up = np.asarray(_vec3(view_up, "view_up"))
+    if not np.linalg.norm(up) > 0:
+        raise ValueError("view_up must not be the zero vector")
+    view_angle = _real(view_angle, "view_angle")
+    if not 0.0 < view_angle < 180.0:
+        raise ValueError(f"view_angle must be in (0, 180) degrees, got {view_angle!r}")
+    zoom = _real(zoom, "zoom")
+    if not zoom > 0:
+        raise ValueError(f"zoom must be positive, got {zoom!r}")
+    aspect = _real(aspect, "aspect")
+    if not aspect > 0:
+        raise ValueError(f"aspect must be positive, got {aspect!r}")
+    if np.linalg.norm(np.cross(d, up)) < 1e-6 * np.linalg.norm(up):
+        up = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    right = np.cross(d, up)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, d)
+    # The points the extent is measured on: the mesh's own (the silhouette of a cylinder is
+    # not its box's), else the corners of its bounding box.
+    pts = getattr(mesh, "points", None)
+    if pts is None or len(pts) == 0:
+        lo, hi = np.asarray(mesh.bounds, dtype=np.float64).reshape(2, 3)
+        pts = np.array([[(lo, hi)[i >> k & 1][k] for k in range(3)] for i in range(8)])
+    rel = np.asarray(pts, dtype=np.float64) - centre
+    x, y, z = rel @ right, rel @ true_up, rel @ -d  # z towards the camera
+    # Centre the extent: shift the focal point within the plane through the box's centre.
+    sx, sy = 0.5 * (x.max() + x.min()), 0.5 * (y.max() + y.min())
+    fill = (1.0 - _FIT_MARGIN) * zoom
+    if parallel:
+        x, y = x - sx, y - sy
+        scale = max(float(np.abs(y).max()), float(np.abs(x).max()) / aspect, 1e-30 * radius) / fill
+        dist = 2.0 * radius + scale  # any distance: outside the bounding sphere
+    else:
+        # Each point p must lie in the view's frustum: |x_p| <= (D - z_p) tan(half_w),
+        # |y_p| <= (D - z_p) tan(half_h); the nearest camera that keeps them all is D.
+        tan_h = math.tan(math.radians(view_angle) / 2) * fill
+        tan_w = tan_h * aspect
+
+        def nearest(xs: NDArray[np.float64], ys: NDArray[np.float64]) -> float:
+            d_fit = float(np.max(np.maximum(np.abs(xs) / tan_w, np.abs(ys) / tan_h) + z))
+            return max(d_fit, float(z.max()) + 0.1 * radius / zoom)  # never inside (a needle seen end-on)
+
+        # Perspective enlarges the near end: centre the projected extent, not the parallel one.
+        for _ in range(8):
+            dist = nearest(x - sx, y - sy)
+            u, v = (x - sx) / (dist - z), (y - sy) / (dist - z)
+            cu, cv = 0.5 * (u.max() + u.min()), 0.5 * (v.max() + v.min())
+            if max(abs(cu) / tan_w, abs(cv) / tan_h) < 1e-3:
+                break
+            depth = dist - 0.5 * (z.max() + z.min())
+            sx, sy = sx + cu * depth, sy + cv * depth
+        x, y = x - sx, y - sy
+        dist = nearest(x, y)
+        scale = radius / zoom
+    focal = centre + sx * right + sy * true_up
+    pos = focal - d * dist
+    near = max(dist - float(z.max()) - 0.05 * radius, dist * 1e-3, 1e-300)
+    far = dist - float(z.min()) + 0.05 * radius
+    return Camera(
+        position=tuple(pos),  # type: ignore[arg-type]
+        focal_point=tuple(focal),  # type: ignore[arg-type]
+        view_up=tuple(up),  # type: ignore[arg-type]
+        view_angle=view_angle,
+        parallel_projection=parallel,
+        parallel_scale=scale,
+        clipping_range=(near, far),
+    )
+
+
+# ---- the clipping range from the data (ParaView recomputes it every frame; a state stores none) ----
+#: VTK's ``vtkRenderer::ClippingRangeExpansion``: the range is widened by half its depth.
+CLIPPING_RANGE_EXPANSION = 0.5
+#: VTK's near-plane tolerance for a 24-bit depth buffer (``NearClippingPlaneTolerance``):
+#: near is at least this fraction of far.
+NEAR_PLANE_TOLERANCE = 0.001
+
+
+def depth_extent(camera: Camera, points: Any) -> tuple[float, float]:
+    """Nearest and farthest depth of ``points`` (an ``(n, 3)`` array, or the ``(2, 3)``
+    corners of a box) along the camera's view direction, measured from its position: the
+    quantity ``clipping_range`` is compared with.
+
+    >>> depth_extent(Camera(position=(0, 0, 5)), [(0, 0, -1), (0, 0, 1)])
+    (4.0, 6.0)
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    d = (p - np.asarray(camera.position)) @ np.asarray(camera.direction)
+    return float(d.min()), float(d.max())
+
+
+def reset_clipping_range(camera: Camera, bounds: Any) -> Camera:
+    """The camera with the clipping range ParaView would give it for data in ``bounds``
+    (a ``(2, 3)`` box ``(lo, hi)``), as ``vtkRenderer::ResetCameraClippingRange`` computes it.
+
+    The depth range of the box's eight corners along the view direction, no nearer than
+    the camera; widened to at least a tenth of the view's height (a flat box seen
+    edge-on); then padded: ``near = 0.99 near - 0.5 (far - near)``, then
+    ``far = 1.01 far + 0.5 (far - near)`` with that near; near at least ``far / 1000``.
+
+    Examples
+    --------
+    >>> cam = reset_clipping_range(Camera(position=(0, 0, 1000)), [(-1, -1, -1), (1, 1, 1)])
+    >>> [round(v, 3) for v in cam.clipping_range]
+    [936.625, 1082.188]
+    """
+    lo, hi = np.asarray(bounds, dtype=np.float64).reshape(2, 3)
+    corners = np.array([[(lo, hi)[i >> k & 1][k] for k in range(3)] for i in range(8)])
+    near, far = depth_extent(camera, corners)
+    far = max(far, 1e-18)
+    if camera.parallel_projection:
+        min_gap = 0.1 * camera.parallel_scale
+    else:
+        min_gap = 0.2 * math.tan(math.radians(camera.view_angle) / 2.0) * far
+    if far - near < min_gap:
+        grow = min_gap - far + near
+        far += grow / 2.0
+        near -= grow / 2.0
+    near = max(near, 0.0)  # data behind the camera does not move the near plane
+    # In sequence, as VTK does: far's padding is measured from the padded near.
+    near = 0.99 * near - (far - near) * CLIPPING_RANGE_EXPANSION
+    far = 1.01 * far + (far - near) * CLIPPING_RANGE_EXPANSION
+    if near >= far:
+        near = 0.01 * far
+    near = max(near, NEAR_PLANE_TOLERANCE * far)
+    return dataclasses.replace(camera, clipping_range=(near, far))
+
+
+def check_clipping_range(camera: Camera, points: Any, *, stacklevel: int = 2) -> bool:
+    """Warn (``UserWarning``) when the camera's clipping range leaves none of ``points``
+    between its near and far planes, so the picture would be blank; returns whether it
+    does. :func:`reset_clipping_range` gives a range from the data."""
+    near, far = camera.clipping_range
+    dmin, dmax = depth_extent(camera, points)
+    if dmax >= near and dmin <= far:
+        return False
+    import warnings
+
+    where = "in front of the near plane" if dmax < near else "beyond the far plane"
+    warnings.warn(f"the camera's clipping_range ({near:.6g}, {far:.6g}) clips all the data away: the data's depth "
+                  f"extent along the view is {dmin:.6g} .. {dmax:.6g}, all of it {where}, so the picture is blank; "
+                  "leave clipping_range out of a scene to compute it from the data, or use "
+                  "tetvr.camera.reset_clipping_range(camera, mesh.bounds)", UserWarning, stacklevel=stacklevel + 1)
+    return True

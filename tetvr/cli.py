@@ -1,4 +1,5 @@
-"""Command line: ``tetvr render scene.json -o out.png``, ``tetvr demo``, ``tetvr info mesh``,
+"""Command line: ``tetvr render mesh.vtu --scalars T -o out.png`` (or a scene JSON), ``tetvr demo``,
+``tetvr info mesh``, ``tetvr --version``,
 ``tetvr animate scene.json --orbit 36 -o frames/``, ``tetvr view scene.json``.
 
 Every failure ends in one line ``tetvr: error: ...`` on stderr (bad arguments get
@@ -142,28 +143,165 @@ def _npy_path(npy: str) -> str:
 
 # ---- commands ----
 
-def _render_scene(scene_path: str, out: str, npy: str | None, method: str) -> int:
-    from .image import atomic_output, write_png
-    from .render import render
-    from .scene import load_scene
+def _step_name(pattern: str, label: str, index: int, t: float, n_steps: int) -> str:
+    """``pattern`` with ``{time}`` and ``{index}`` filled in; one name per step required."""
+    if n_steps > 1 and not any(k in pattern for k in ("{time", "{index")):
+        raise ValueError(f"the scene's .pvd has {n_steps} time steps: put {{time}} or {{index}} in the {label} "
+                         f"name (e.g. frame_{{time}}.png) to write one file per step, got {pattern!r}")
+    try:
+        return pattern.format(time=t, index=index)
+    except (KeyError, IndexError, ValueError) as exc:
+        raise ValueError(f"the {label} name {pattern!r} may use only {{time}} and {{index}} fields: {exc}") from None
 
-    npy_out = _npy_path(npy) if npy else None
-    outputs: list[tuple[str, str]] = [("PNG", out)] + ([("--npy array", npy_out)] if npy_out else [])
+
+def _is_scene(path: str) -> bool:
+    """A scene JSON file (by its name, or a JSON object by any name) or a ParaView state
+    (``.pvsm``, read by :func:`tetvr.paraview.load_state`), else a mesh file."""
+    if path.lower().endswith((".json", ".pvsm")):
+        return True
+    if not os.path.isfile(path):  # never open a FIFO (it would block) or a device: the reader says what it is
+        return False
+    try:
+        with open(path, "rb") as f:
+            head = f.read(256).lstrip()
+    except OSError:
+        return False  # the mesh reader says what is wrong with it
+    return head[:1] == b"{"
+
+
+def _size_arg(text: str) -> tuple[int, int]:
+    """``WxH`` (or ``W,H``) as two positive integers."""
+    parts = re.split(r"[x,X ]", text.strip())
+    try:
+        w, h = (int(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1024x768, got {text!r}") from None
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"expected two positive integers WIDTHxHEIGHT, got {text!r}")
+    return w, h
+
+
+_COLOUR_NAMES = {"white": (1.0, 1.0, 1.0), "black": (0.0, 0.0, 0.0), "gray": (0.5, 0.5, 0.5),
+                 "grey": (0.5, 0.5, 0.5), "paraview": (0.32, 0.34, 0.43)}
+
+
+def _colour_arg(text: str) -> tuple[float, float, float]:
+    """A background: a name (``white``, or any matplotlib colour), ``#rrggbb`` or ``r,g,b`` in [0, 1]."""
+    t = text.strip().lower()
+    if t in _COLOUR_NAMES:
+        return _COLOUR_NAMES[t]
+    if re.fullmatch(r"#[0-9a-f]{6}", t):
+        return tuple(int(t[i:i + 2], 16) / 255.0 for i in (1, 3, 5))  # type: ignore[return-value]
+    if "," in t:
+        try:
+            rgb = tuple(float(v) for v in t.split(","))
+        except ValueError:
+            rgb = ()
+        if len(rgb) == 3 and all(0.0 <= v <= 1.0 for v in rgb):
+            return rgb  # type: ignore[return-value]
+        raise argparse.ArgumentTypeError(f"expected r,g,b with components in [0, 1], got {text!r}")
+    try:
+        from matplotlib.colors import to_rgb
+
+        return tuple(float(v) for v in to_rgb(t))  # type: ignore[return-value]
+    except (ImportError, ValueError):
+        raise argparse.ArgumentTypeError(f"unknown colour {text!r}: use white, black, #rrggbb, r,g,b in [0, 1] or a "
+                                         "matplotlib colour name") from None
+
+
+def _write_picture(image: Any, out: str, *, tf: Any, mesh: Any, camera: Any, background: Any,
+                   annotate: bool, title: str | None, units: str | None) -> str:
+    """The PNG: annotated (legend, triad, outline) unless asked not to or matplotlib is
+    missing (then the plain image, with a note); returns what was written."""
+    from .image import atomic_output, png_bytes
+
+    data = None
+    if annotate:
+        try:
+            from .annotate import annotate as annotate_png
+
+            data = annotate_png(image, tf, field=mesh.scalar_name, units=units, title=title, camera=camera,
+                                bounds=mesh.bounds, background=background)
+        except ImportError:
+            print("tetvr: note: the picture has no legend: matplotlib is not installed (pip install 'tetvr[plot]')",
+                  file=sys.stderr)
+    what = "annotated PNG" if data is not None else "PNG"
+    if data is None:
+        data = png_bytes(image, background=background)
+    with atomic_output(out) as f:
+        f.write(data)
+    return what
+
+
+def _render(args: argparse.Namespace) -> int:
+    """A mesh file (default scene: fitted camera, the data-driven transfer function) or a
+    scene JSON; a ``.pvd`` (named by either) renders every time step, one file each."""
+    from .camera import _fit
+    from .collections import is_collection, leaf_files, quiet_first_step, read_pvd, read_step
+    from .image import atomic_output
+    from .render import default_transfer_function, render
+    from .scene import Scene, load_scene
+
+    method = "reference" if args.reference else "gpu"
+    t0 = time.perf_counter()
+    with quiet_first_step():  # a .pvd's steps are all rendered here
+        if _is_scene(args.scene):
+            for flag, value in (("--scalars", args.scalars), ("--cmap", args.cmap), ("--component", args.component)):
+                if value is not None:
+                    raise ValueError(f"{flag} is for a mesh file; a scene sets it in its JSON ({args.scene!r})")
+            for path, label in [(args.output, "PNG")] + ([(args.npy, "--npy array")] if args.npy else []):
+                if "{" not in path:
+                    _check_writable(path, label)
+            scene = load_scene(args.scene)
+            inputs = _scene_inputs(args.scene, scene)
+        else:
+            from .mesh import read
+
+            inputs = [("mesh file", args.scene)]
+            if "{" not in args.output and not is_collection(args.scene):
+                _check_writable(args.output, "PNG")
+                _refuse_overwrite([("PNG", args.output)], inputs)
+            mesh = read(args.scene, args.scalars, component=args.component)
+            size = args.size or (800, 600)
+            scene = Scene(mesh_path=args.scene, mesh=mesh, tf=default_transfer_function(mesh, preset=args.cmap or "viridis"),
+                          camera=_fit(mesh, aspect=size[0] / size[1]), size=size,
+                          scalars=mesh.scalar_name, component=args.component)
+    size = args.size or scene.size
+    background = args.background or scene.background
+    coll = read_pvd(scene.mesh_path) if Path(scene.mesh_path).suffix.lower() == ".pvd" else None
+    if coll is not None:
+        inputs += [("collection file", p) for p in coll.input_paths()]
+    elif is_collection(scene.mesh_path):
+        inputs += [("collection file", p) for p in leaf_files(scene.mesh_path)]
+    steps = list(enumerate(coll.times)) if coll is not None else [(0, None)]
+    n = len(steps)
+    jobs = []
+    for i, t in steps:
+        png = _step_name(args.output, "PNG", i, t, n) if t is not None else args.output
+        npy = (_npy_path(_step_name(args.npy, "--npy array", i, t, n) if t is not None else args.npy)
+               if args.npy else None)
+        jobs.append((i, t, png, npy))
+    outputs = [("PNG", png) for _, _, png, _ in jobs] + [("--npy array", npy) for _, _, _, npy in jobs if npy]
     for label, path in outputs:
         _check_writable(path, label)
-    t0 = time.perf_counter()
-    scene = load_scene(scene_path)
-    _refuse_overwrite(outputs, _scene_inputs(scene_path, scene))
+    _refuse_overwrite(outputs, inputs)
     t1 = time.perf_counter()
-    image = render(scene.mesh, camera=scene.camera, tf=scene.tf, size=scene.size, settings=scene.settings,
-                   method=method)
-    t2 = time.perf_counter()
-    write_png(image, out, background=scene.background)
-    if npy_out:
-        with atomic_output(npy_out) as f:
-            np.save(f, image)
-    print(f"{scene.mesh.n_tets} tets, field {scene.mesh.scalar_name!r}, {scene.size[0]}x{scene.size[1]} px, "
-          f"{method}: read {t1 - t0:.2f} s, render {t2 - t1:.2f} s -> {out}" + (f" and {npy_out}" if npy_out else ""))
+    for i, t, png, npy in jobs:
+        ts = time.perf_counter()
+        mesh = scene.mesh if i == 0 or coll is None else read_step(coll, i, scene.scalars, component=scene.component)
+        image = render(mesh, camera=scene.camera, tf=scene.tf, size=size, settings=scene.settings, method=method)
+        t2 = time.perf_counter()
+        what = _write_picture(image, png, tf=scene.tf, mesh=mesh, camera=scene.camera, background=background,
+                              annotate=not args.no_annotations, units=args.units,
+                              title=args.title if t is None or not args.title else f"{args.title} (t = {t:g})")
+        if npy:
+            with atomic_output(npy) as f:
+                np.save(f, image)
+        step = f"step {i} (t = {t:g}): " if t is not None else ""
+        print(f"{step}{mesh.n_tets} tets, field {mesh.scalar_name!r}, {size[0]}x{size[1]} px, {method}: "
+              f"read {(t1 - t0) if i == 0 else (ts - t1):.2f} s, render {t2 - ts:.2f} s -> {what} {png}"
+              + (f" and {npy}" if npy else ""))
+        t1 = time.perf_counter()
     return EXIT_OK
 
 
@@ -241,14 +379,97 @@ def _animate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _info(args: argparse.Namespace) -> int:
-    from .mesh import read
+def _stats_line(values: Any, weights: Any = None) -> str:
+    """min, percentiles (weighted by volume where given) and max of a field, as text."""
+    from .transfer import robust_range
 
-    mesh = read(args.mesh)
+    v = np.asarray(values, dtype=np.float64)
+    if v.ndim == 2:
+        v = np.linalg.norm(v, axis=1)
+    finite = np.isfinite(v)
+    if not finite.any():
+        return "no finite values"
+    w = None if weights is None else np.asarray(weights)[finite]
+    p1, p99 = robust_range(v[finite], w, (1.0, 99.0))
+    _, median = robust_range(v[finite], w, (0.0, 50.0))
+    bad = f", {int((~finite).sum())} NaN/Inf" if not finite.all() else ""
+    return (f"range {v[finite].min():.4g} .. {v[finite].max():.4g}; 1% {p1:.4g}, median {median:.4g}, "
+            f"99% {p99:.4g}{bad}")
+
+
+def _is_volume(path: str) -> bool:
+    from .volume_io import VOLUME_SUFFIXES
+
+    name = path.lower()
+    if os.path.isdir(path):
+        return True
+    if name.endswith(".vtk"):  # legacy VTK: structured points are a volume, anything else a mesh
+        if not os.path.isfile(path):
+            return False
+        try:
+            with open(path, "rb") as f:
+                return b"STRUCTURED_POINTS" in f.read(1024).upper()
+        except OSError:
+            return False
+    return name.endswith(tuple(s for s in VOLUME_SUFFIXES if s != ".vtk"))
+
+
+def _info(args: argparse.Namespace) -> int:
+    if _is_volume(args.mesh):
+        from .volume import read_volume
+
+        vol = read_volume(args.mesh)
+        lo, hi = vol.bounds
+        print(f"{args.mesh}: a volume of {vol.dims[0]} x {vol.dims[1]} x {vol.dims[2]} voxels ({vol.dtype}), "
+              f"spacing {' x '.join(f'{v:.4g}' for v in vol.spacing)}"
+              + (f", frame {vol.space}" if vol.space else ""))
+        print(f"  bounds  {' '.join(f'{v:.4g}' for v in lo)} .. {' '.join(f'{v:.4g}' for v in hi)}")
+        print(f"  field   {vol.scalar_name!r}: {_stats_line(vol.data.reshape(-1))}")
+        return EXIT_OK
+    from . import mesh as mesh_mod
+    from .cells import read_cells
+    from .transfer import point_weights
+
+    mesh = mesh_mod.read(args.mesh, args.scalars)  # through the module: the checked reader
+    rep = mesh.report
     lo, hi = mesh.bounds
-    print(f"{args.mesh}: {mesh.n_points} points, {mesh.n_tets} tets; field {mesh.scalar_name!r} "
-          f"range {mesh.scalar_range}; bounds {lo.tolist()} .. {hi.tolist()}; report {mesh.report}")
+    print(f"{args.mesh}: {mesh.n_points} points, {mesh.n_tets} tetrahedra")
+    print(f"  bounds  {' '.join(f'{v:.4g}' for v in lo)} .. {' '.join(f'{v:.4g}' for v in hi)}  "
+          f"(size {' x '.join(f'{v:.4g}' for v in hi - lo)})")
+    if rep.split_cells:
+        print("  cells   " + ", ".join(f"{n} {k}" for k, n in rep.split_cells) + " split into tetrahedra"
+              + (f" ({rep.steiner_points} centroid points added)" if rep.steiner_points else ""))
+    if rep.ignored_cells:
+        print("  left out (not volume cells): " + ", ".join(f"{n} {k}" for k, n in rep.ignored_cells))
+    if rep.dropped_degenerate:
+        print(f"  {rep.dropped_degenerate} zero-volume tetrahedra (flat: their corners lie in a plane) are left out; "
+              "they add nothing to the picture")
+    if rep.inverted_fixed:
+        print(f"  {rep.inverted_fixed} tetrahedra had their corners in inverted (left-handed) order; "
+              "they are turned round, which changes nothing in the picture")
+    cells = read_cells(args.mesh, meshio_read=mesh_mod._read_any)  # as read() does: collections merged
+    weights = point_weights(cells.points, cells.tets)
+    print("  fields")
+    for name, values in cells.point_data.items():
+        comp = f", {values.shape[1]} components (magnitude)" if values.ndim == 2 and values.shape[1] > 1 else ""
+        mark = "*" if name == mesh.scalar_name else " "
+        print(f"   {mark} {name!r} (point{comp}): {_stats_line(values, weights)}")
+    cell_volume = np.abs(mesh_mod._signed_volume6(cells.points, np.asarray(cells.tets, dtype=np.int64))) / 6.0
+    for name, values in cells.cell_data.items():
+        if name in cells.point_data:
+            continue
+        comp = f", {values.shape[1]} components (magnitude)" if values.ndim == 2 and values.shape[1] > 1 else ""
+        mark = "*" if name == mesh.scalar_name else " "
+        print(f"   {mark} {name!r} (cell{comp}): {_stats_line(values, cell_volume)}")
+    print(f"  * rendered by default; percentiles weighted by volume. Default colour range "
+          f"{' .. '.join(f'{v:.4g}' for v in _default_range(mesh))}")
     return EXIT_OK
+
+
+def _default_range(mesh: Any) -> tuple[float, float]:
+    from .render import default_transfer_function
+
+    return default_transfer_function(mesh).domain
 
 
 def _view(args: argparse.Namespace) -> int:
@@ -261,11 +482,13 @@ def _view(args: argparse.Namespace) -> int:
 def _demo(args: argparse.Namespace) -> int:
     from .scene import demo_scene_path
 
-    return _render_scene(str(demo_scene_path()), args.output, None, "gpu")
+    return _render(argparse.Namespace(scene=str(demo_scene_path()), output=args.output, npy=None, reference=False,
+                                      scalars=None, component=None, cmap=None, size=None, background=None,
+                                      title=None, units=None, no_annotations=False))
 
 
 _COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
-    "render": lambda a: _render_scene(a.scene, a.output, a.npy, "reference" if a.reference else "gpu"),
+    "render": _render,
     "demo": _demo,
     "fusion-demo": lambda a: _fusion_demo(Path(a.output), tuple(a.size)),
     "compare": _compare,
@@ -319,11 +542,29 @@ def _fail(status: int, message: str) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     parser = _Parser(prog="tetvr", description="Volume rendering of tetrahedral meshes.", epilog=_EPILOG)
+    parser.add_argument("--version", action="version", version=f"tetvr {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    p_render = sub.add_parser("render", help="render a scene JSON file to a PNG", epilog=_EPILOG)
-    p_render.add_argument("scene", help="scene JSON (see the README for its schema)")
-    p_render.add_argument("-o", "--output", default="out.png", help="PNG to write (default: out.png)")
+    p_render = sub.add_parser("render", help="render a mesh file (or .pvd, .vtm, .pvtu) or a scene JSON to a PNG "
+                              "with a legend", epilog=_EPILOG)
+    p_render.add_argument("scene", metavar="mesh_or_scene",
+                          help="a mesh file (VTU, VTK, Gmsh, Exodus, ...), a ParaView collection, or a scene JSON "
+                          "(see the README)")
+    p_render.add_argument("-o", "--output", default="out.png", help="PNG to write (default: out.png); for a .pvd "
+                          "of several time steps a pattern with {time} or {index}, e.g. frame_{time}.png")
+    p_render.add_argument("--scalars", help="the field to render (a mesh file; default: its first field)")
+    p_render.add_argument("--component", type=int, help="a vector field's component (default: its magnitude)")
+    p_render.add_argument("--cmap", help="colour map: viridis, cool-to-warm, grayscale, hot, or any matplotlib "
+                          "colormap name such as magma (a mesh file; default: viridis)")
+    p_render.add_argument("--size", type=_size_arg, metavar="WxH", help="image size (default: 800x600, or the scene's)")
+    p_render.add_argument("--background", type=_colour_arg, metavar="COLOUR",
+                          help="white (default), black, #rrggbb, r,g,b in [0, 1] or a matplotlib colour name")
+    p_render.add_argument("--title", help="a title above the picture")
+    p_render.add_argument("--units", help="the field's units, for the legend")
+    p_render.add_argument("--no-annotations", action="store_true",
+                          help="the plain image: no legend, axes triad or box outline")
     p_render.add_argument("--npy", help="also save the premultiplied float32 RGBA array here (.npy is added "
                           "if missing)")
     p_render.add_argument("--reference", action="store_true", help="use the exact CPU reference renderer")
@@ -340,8 +581,10 @@ def _parser() -> argparse.ArgumentParser:
     p_cmp.add_argument("--mappers", default="pt,bunyk,zsweep", help="VTK mappers, comma-separated ('' for none)")
     p_cmp.add_argument("--views", type=int, default=5, help="view changes to time (default 5)")
     p_cmp.add_argument("--size", type=int, nargs=2, metavar=("W", "H"), help="image size (default: the scene's)")
-    p_info = sub.add_parser("info", help="describe a mesh file (points, tets, field, range, bounds)", epilog=_EPILOG)
-    p_info.add_argument("mesh")
+    p_info = sub.add_parser("info", help="describe a mesh or volume file: fields, ranges, percentiles, cells",
+                            epilog=_EPILOG)
+    p_info.add_argument("mesh", help="a mesh file, or a volume file (NRRD, MetaImage, VTI, NIfTI, DICOM folder)")
+    p_info.add_argument("--scalars", help="the field marked as rendered (default: the first)")
     p_view = sub.add_parser("view", help="open a scene in a desktop window (needs moderngl-window and a display)",
                             epilog=_EPILOG)
     p_view.add_argument("scene", help="scene JSON")
@@ -359,8 +602,21 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _show_warning(message: Any, category: Any, filename: str, lineno: int, file: Any = None, line: Any = None) -> None:
+    # What happened, in the user's terms: no source file and line of tetvr's.
+    print(f"tetvr: warning: {_one_line(str(message))}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status (see the module notes)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        return _main(argv)
+
+
+def _main(argv: list[str] | None) -> int:
     try:
         parser = _parser()
         try:

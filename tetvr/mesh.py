@@ -183,6 +183,92 @@ class TetMesh:
     def scalar_range(self) -> tuple[float, float]:
         return float(self.scalars.min()), float(self.scalars.max())
 
+    # ---- what users of the field hold: meshio, pyvista, vtk ----
+    @classmethod
+    def from_meshio(cls, mesh: Any, scalars: str | None = None, *, component: int | None = None) -> "TetMesh":
+        """A mesh from a ``meshio.Mesh``, as :func:`read` makes one from a file (volume
+        cells split into tets, cell fields averaged onto the points).
+
+        Examples
+        --------
+        >>> import meshio
+        >>> m = meshio.Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [("tetra", [[0, 1, 2, 3]])],
+        ...                 point_data={"T": [0.0, 1.0, 2.0, 3.0]})
+        >>> TetMesh.from_meshio(m).scalar_name
+        'T'
+        """
+        blocks = [(c.type, c.data) for c in mesh.cells]
+        point_data = {k: np.asarray(v) for k, v in mesh.point_data.items()}
+        cell_blocks = {k: [np.asarray(b) for b in v] for k, v in mesh.cell_data.items()}
+        return _from_blocks(mesh.points, blocks, point_data, cell_blocks, scalars, component, "the meshio.Mesh")
+
+    @classmethod
+    def from_pyvista(cls, grid: Any, scalars: str | None = None, *, component: int | None = None) -> "TetMesh":
+        """A mesh from a ``pyvista`` data set or any ``vtk`` data set (``vtkUnstructuredGrid``,
+        ``vtkImageData``, ...); pyvista is not needed, vtk is (it is what the object is made of).
+
+        Unstructured grids go through tetvr's own conforming split of their volume cells;
+        other data sets through VTK's ``vtkDataSetTriangleFilter``.
+        """
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+
+        if not hasattr(grid, "GetNumberOfCells"):
+            raise TypeError(f"expected a pyvista or vtk data set, got {type(grid).__name__}")
+        if not grid.IsA("vtkUnstructuredGrid"):
+            from vtkmodules.vtkFiltersGeneral import vtkDataSetTriangleFilter
+
+            tri = vtkDataSetTriangleFilter()
+            tri.SetInputData(grid)
+            tri.Update()
+            grid = tri.GetOutput()
+        if grid.GetNumberOfPoints() == 0 or grid.GetNumberOfCells() == 0:
+            raise ValueError("the vtk data set has no points or no cells")
+        points = vtk_to_numpy(grid.GetPoints().GetData()).astype(np.float64)
+        from vtkmodules.vtkCommonCore import vtkVersion
+
+        # GetCellTypes() returns the array from VTK 9.6 on; GetCellTypesArray() before (deprecated since).
+        new_api = (vtkVersion.GetVTKMajorVersion(), vtkVersion.GetVTKMinorVersion()) >= (9, 6)
+        types = vtk_to_numpy(grid.GetCellTypes() if new_api else grid.GetCellTypesArray())
+        offsets = vtk_to_numpy(grid.GetCells().GetOffsetsArray()).astype(np.int64)
+        conn = vtk_to_numpy(grid.GetCells().GetConnectivityArray()).astype(np.int64)
+        blocks: list[tuple[str, Any]] = []
+        cell_order: list[Any] = []
+        for t in np.unique(types):
+            name = _VTK_CELL_TYPES.get(int(t), f"vtk cell type {int(t)}")
+            ids = np.nonzero(types == t)[0]
+            n = offsets[ids + 1] - offsets[ids]
+            if np.all(n == n[0]):  # fixed-size cells (all volume cells tetvr splits are)
+                data = conn[offsets[ids][:, None] + np.arange(n[0])]
+            else:
+                data = np.zeros((len(ids), 0), dtype=np.int64)
+            blocks.append((name, data))
+            cell_order.append(ids)
+
+        def arrays(attrs: Any) -> dict[str, NDArray[Any]]:
+            out = {}
+            for i in range(attrs.GetNumberOfArrays()):
+                arr = attrs.GetArray(i)
+                if arr is not None and arr.GetName():
+                    out[arr.GetName()] = vtk_to_numpy(arr)
+            return out
+
+        point_data = arrays(grid.GetPointData())
+        cell_blocks = {k: [v[ids] for ids in cell_order] for k, v in arrays(grid.GetCellData()).items()}
+        return _from_blocks(points, blocks, point_data, cell_blocks, scalars, component, "the vtk data set")
+
+    def to_pyvista(self) -> Any:
+        """The mesh as a ``pyvista.UnstructuredGrid`` of tets, with its field as point data
+        (needs pyvista: ``pip install pyvista``)."""
+        try:
+            import pyvista
+        except ImportError:
+            raise ImportError("TetMesh.to_pyvista needs pyvista: pip install pyvista") from None
+        grid = pyvista.UnstructuredGrid({pyvista.CellType.TETRA: np.asarray(self.tets, dtype=np.int64)},
+                                        np.asarray(self.points))
+        grid.point_data[self.scalar_name] = np.asarray(self.scalars)
+        grid.set_active_scalars(self.scalar_name)
+        return grid
+
     def with_scalars(self, scalars: ArrayLike, name: str = "scalars") -> "TetMesh":
         """The same geometry with another point field."""
         s = _as_float_array(scalars, "scalars")
@@ -239,7 +325,9 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
 
     Parameters
     ----------
-    path : mesh file (VTU, VTK, Gmsh, Exodus, ...).
+    path : mesh file (VTU, VTK, Gmsh, Exodus, ...), or a ParaView collection: a ``.vtm``
+        multiblock or ``.pvtu`` partitioned grid (merged), a ``.pvd`` (its first time step;
+        :mod:`tetvr.collections` reads the others).
     scalars : name of the point or cell field to render; by default the first point
         field, else the first cell field. Vector fields render by magnitude, or by
         ``component`` when given.
@@ -268,7 +356,7 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
         raise TypeError(f"component must be an integer or None, got {component!r}")
     from .cells import read_cells  # volume cells split into tets; legacy VTK meshio refuses is read there
 
-    m = read_cells(path, meshio_read=_meshio_read)
+    m = read_cells(path, meshio_read=_read_any)
     tets = m.tets
     if m.split.split or m.split.ignored:
         warnings.warn(f"{os.path.basename(path)}: {m.split.summary()}", stacklevel=2)
@@ -510,6 +598,77 @@ def _meshio_read(path: str) -> Any:
             warnings.warn(f"meshio reading {path!r}: {said_ok}", stacklevel=3)
         return m
     raise ValueError(f"cannot read mesh file {path!r}: " + " | ".join(failures))
+
+
+def _read_any(path: str) -> Any:
+    """The dispatch: ParaView's collections (.pvd, .vtm, .pvtu) to :mod:`tetvr.collections`,
+    which merges their files read by :func:`_meshio_read`; any other file to meshio."""
+    from .collections import is_collection, merged_meshio
+
+    if is_collection(path):
+        return merged_meshio(path, meshio_read=_meshio_read)
+    return _meshio_read(path)
+
+
+# VTK cell type ids -> meshio's cell names (the volume cells tetvr splits, and what is left out).
+_VTK_CELL_TYPES = {1: "vertex", 3: "line", 5: "triangle", 7: "polygon", 9: "quad", 10: "tetra", 11: "voxel",
+                   12: "hexahedron", 13: "wedge", 14: "pyramid", 24: "tetra10", 25: "hexahedron20",
+                   26: "wedge15", 27: "pyramid13", 29: "hexahedron27"}
+
+
+def _from_blocks(points: ArrayLike, blocks: list[tuple[str, Any]], point_data: dict[str, NDArray[Any]],
+                 cell_blocks: dict[str, list[NDArray[Any]]], scalars: str | None, component: int | None,
+                 where: str) -> TetMesh:
+    """A mesh from cell blocks and fields held in memory, as :func:`read` makes one from a file."""
+    from .cells import split_cells
+
+    if scalars is not None and not isinstance(scalars, str):
+        raise TypeError(f"scalars must be a field name (str) or None, got {scalars!r}")
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim == 2 and pts.shape[1] == 2:
+        pts = np.c_[pts, np.zeros(pts.shape[0])]
+    if "voxel" in dict(blocks):  # VTK's voxel orders its corners as a grid, a hexahedron as a loop
+        blocks = [(k, np.asarray(d)[:, [0, 1, 3, 2, 4, 5, 7, 6]] if k == "voxel" else d) for k, d in blocks]
+        blocks = [("hexahedron" if k == "voxel" else k, d) for k, d in blocks]
+    split = split_cells(pts, blocks)
+    if split.tets.shape[0] == 0:
+        found = ", ".join(f"{k}: {v}" for k, v in split.ignored) or "no cells"
+        raise ValueError(f"{where} contains no tetrahedra or other volume cells ({found})")
+    if split.split or split.ignored:
+        warnings.warn(f"{where}: {split.summary()}", stacklevel=3)
+    names = list(point_data) + [n for n in cell_blocks if n not in point_data]
+    if scalars is None:
+        if not names:
+            raise ValueError(f"{where} has no point or cell data to render")
+        scalars = names[0]
+    used = np.zeros(split.points.shape[0], dtype=bool)
+    used[split.tets.ravel()] = True
+    if scalars in point_data:
+        v = np.asarray(point_data[scalars])
+        if v.shape[:1] != (pts.shape[0],):
+            raise ValueError(f"{where}: point field {scalars!r} has {v.shape[0] if v.ndim else 0} values, "
+                             f"but the mesh has {pts.shape[0]} points")
+        values = _field_to_scalar(split.extend(v), scalars, component)
+        source = "point"
+    elif scalars in cell_blocks:
+        flat = np.concatenate([np.asarray(b).reshape(len(b), -1) for b in cell_blocks[scalars]])
+        if flat.shape[0] != sum(len(d) for _, d in blocks):
+            raise ValueError(f"{where}: cell field {scalars!r} has {flat.shape[0]} values, but the mesh has "
+                             f"{sum(len(d) for _, d in blocks)} cells")
+        col = flat[split.parent]
+        cell_values = _field_to_scalar(col[:, 0] if col.shape[1] == 1 else col, scalars, component)
+        values = _cell_to_point(split.points, split.tets.astype(np.int64), cell_values.astype(np.float64))
+        source = "cell"
+    else:
+        raise KeyError(f"no field named {scalars!r} in {where}; point fields: {list(point_data)}, "
+                       f"cell fields: {list(cell_blocks)}")
+    if not np.all(used):
+        values = values[used]
+        split = split.compacted(used)
+    mesh = TetMesh.from_arrays(split.points, split.tets, values, scalar_name=scalars)
+    report = dataclasses.replace(mesh.report, ignored_cells=split.ignored, scalar_source=source,
+                                 split_cells=split.split, steiner_points=split.steiner_points, fields=tuple(names))
+    return dataclasses.replace(mesh, report=report)
 
 
 def _cell_to_point(points: NDArray[np.float64], tets: NDArray[np.int64], values: NDArray[np.float64]) -> NDArray[np.float64]:

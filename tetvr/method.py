@@ -13,12 +13,34 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from .settings import RenderSettings
 
 if TYPE_CHECKING:
+    from .camera import Camera
     from .mesh import TetMesh
 
-__all__ = ["choose", "RAYMARCH_ONLY", "PROJECTED_ONLY"]
+__all__ = ["choose", "segments_per_tet", "RAYMARCH_ONLY", "PROJECTED_ONLY", "CROSSOVER_SEGMENTS_PER_TET",
+           "AUTO_MAX_TETS"]
+
+#: Segments per tet above which "auto" takes projected tetrahedra for speed. Measured on
+#: llvmpipe at 512x512 (bench/results/stages.json, 10k to 330k tets), projected tetrahedra
+#: pay ~2.5 us per tet plus ~37 ns per fragment (= segment), tet marching ~6 ms per frame
+#: plus ~64 ns per segment: they cost the same near 90 segments per tet, and projected
+#: tetrahedra are at most ~1.7x faster however large the tets are on screen. "auto" gives
+#: that up until projected tetrahedra are predicted 1.5x faster (~430 segments per tet):
+#: large cells seen close up are where a cell order and degenerate projections cost
+#: projected tetrahedra accuracy (the stability suite, tests/test_near_plane_fuzz.py),
+#: which tet marching does not lose.
+CROSSOVER_SEGMENTS_PER_TET = 430.0
+#: Above this many tets "auto" keeps projected tetrahedra, which draw in chunks with bounded
+#: memory (bench/memory.py: 10M tets in 3.5 GB of host memory); the ray caster holds every
+#: tet's record (96 B on the GPU, which llvmpipe keeps in host memory) and builds the face
+#: adjacency of the whole mesh (peak ~0.5 GB per million tets, like projected tetrahedra's
+#: unchunked path).
+AUTO_MAX_TETS = 2_000_000
+_SAMPLE = 4096
 
 #: Settings only projected tetrahedra implement: VTK's fragment formula (parity mode with
 #: VTK's screen-linear interpolation) and an 8-bit compositing target.
@@ -27,16 +49,23 @@ PROJECTED_ONLY = ("optics='vtk'", "framebuffer='uint8'", "perspective_correct=Fa
 RAYMARCH_ONLY: tuple[str, ...] = ()
 
 
-def choose(settings: RenderSettings, mesh: "TetMesh | None" = None) -> str:
+def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Camera | None" = None,
+           size: tuple[int, int] | None = None) -> str:
     """The method a frame with these settings (and this mesh) uses: ``"projected"`` or
     ``"raymarch"``.
 
-    ``"auto"`` picks tet marching, which measured faster than projected tetrahedra on every
-    mesh and size of the benchmarks on llvmpipe (bench/README.md) and is exact in visibility
-    order, except where a setting exists only for projected tetrahedra
-    (:data:`PROJECTED_ONLY`: VTK parity, 8-bit compositing, screen-linear interpolation)
-    or where the mesh is tangled (cells that overlap in space:
-    :func:`tetvr.marching.folded_faces`), which a walk from cell to cell cannot follow.
+    ``"auto"`` picks tet marching -- exact in visibility order, and faster on llvmpipe
+    wherever tets cover fewer than ~90 pixels each (bench/README.md) -- except:
+
+    * settings only projected tetrahedra implement (:data:`PROJECTED_ONLY`: VTK parity,
+      8-bit compositing, screen-linear interpolation);
+    * tangled meshes (cells that overlap in space: :func:`tetvr.marching.folded_faces`),
+      which a walk from cell to cell cannot follow;
+    * meshes above :data:`AUTO_MAX_TETS` (memory: projected tetrahedra draw in chunks);
+    * given the camera and size, views from outside the mesh whose tets are so large on
+      screen (:func:`segments_per_tet` above :data:`CROSSOVER_SEGMENTS_PER_TET`) that
+      rasterising their few triangles is predicted 1.5x faster than walking their many
+      segments.
 
     Examples
     --------
@@ -52,6 +81,57 @@ def choose(settings: RenderSettings, mesh: "TetMesh | None" = None) -> str:
     if mesh is not None:
         from .marching import folded_faces
 
+        if mesh.n_tets > AUTO_MAX_TETS:
+            return "projected"
         if folded_faces(mesh):
             return "projected"
+        if (camera is not None and size is not None and not _eye_near_mesh(mesh, camera)
+                and segments_per_tet(mesh, camera, size) > CROSSOVER_SEGMENTS_PER_TET):
+            return "projected"
     return "raymarch"
+
+
+def _eye_near_mesh(mesh: "TetMesh", camera: "Camera") -> bool:
+    """The eye inside the mesh's bounding box grown by a tenth of its diagonal (views from
+    inside or beside the mesh: no cell order is exact there)."""
+    lo, hi = mesh.bounds
+    pad = 0.1 * float(np.linalg.norm(hi - lo))
+    eye = np.asarray(camera.position)
+    return bool(np.all(eye >= lo - pad) and np.all(eye <= hi + pad))
+
+
+def segments_per_tet(mesh: "TetMesh", camera: "Camera", size: tuple[int, int]) -> float:
+    """Estimated ray--tet segments per tet in a view: the mean projected area, in pixels,
+    of the tets in front of the eye (a sample of at most 4096), whose sum over the mesh is
+    the number of segments either method integrates (a fragment of projected tetrahedra is
+    one segment). A tet's parallel projection covers half the sum of its faces' areas
+    times their |cosine| to the view direction; in perspective the scale at its centroid's
+    depth is used.
+
+    Examples
+    --------
+    >>> from tetvr import Camera, synthetic
+    >>> mesh = synthetic.cube(4)
+    >>> round(segments_per_tet(mesh, Camera.fit(mesh, parallel=True), (64, 64)), 1) > 0
+    True
+    """
+    n = mesh.n_tets
+    ids = np.arange(n) if n <= _SAMPLE else np.random.default_rng(0).choice(n, _SAMPLE, replace=False)
+    p = mesh.points[mesh.tets[ids]]  # (s, 4, 3)
+    view = camera.view_matrix()
+    eye = p @ view[:3, :3].T + view[:3, 3]
+    depth = -eye[..., 2].mean(axis=1)
+    faces = ((1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1))
+    area = np.zeros(ids.shape[0])
+    for a, b, c in faces:
+        area += 0.5 * np.abs(np.cross(eye[:, b] - eye[:, a], eye[:, c] - eye[:, a])[:, 2])
+    area *= 0.5  # front and back faces both cover the projection
+    near = camera.clipping_range[0]
+    if camera.parallel_projection:
+        px_per_unit = size[1] / (2.0 * camera.parallel_scale)
+        scale = np.full(ids.shape[0], px_per_unit**2)
+    else:
+        focal = size[1] / (2.0 * np.tan(np.radians(camera.view_angle) / 2.0))
+        scale = (focal / np.maximum(depth, near)) ** 2
+    visible = depth > near
+    return float(np.sum(area * scale * visible) / ids.shape[0])

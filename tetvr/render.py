@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Any
+import warnings
+from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .camera import Camera
+from .camera import Camera, check_clipping_range
 from .mesh import TetMesh
 from .settings import RenderSettings
-from .transfer import TransferFunction
+from .transfer import DEFAULT_OPACITY_RAMP, TransferFunction, default_unit_distance, point_weights, robust_range
 
 __all__ = ["render", "default_transfer_function"]
 
@@ -40,11 +41,63 @@ def _tf_range(lo: float, hi: float) -> tuple[float, float]:
     return lo, hi
 
 
-def default_transfer_function(mesh: TetMesh, *, preset: str = "viridis", opacity: float = 0.5) -> TransferFunction:
-    """A preset over the mesh's scalar range; unit distance 1/20 of the mesh's diagonal."""
-    lo, hi = _tf_range(*mesh.scalar_range)
+def default_transfer_function(
+    mesh: TetMesh,
+    *,
+    preset: str = "viridis",
+    opacity: float | Sequence[tuple[float, float]] | None = None,
+    scalar_range: tuple[float, float] | None = None,
+    unit_distance: float | None = None,
+) -> TransferFunction:
+    """The default transfer function of a mesh: the one rule of :mod:`tetvr.transfer`.
+
+    The range spans the 1st..99.5th percentile of the field weighted by volume
+    (:func:`~tetvr.transfer.robust_range`), the opacity ramps up quadratically across it
+    (:data:`~tetvr.transfer.DEFAULT_OPACITY_RAMP`) so that high values stand out, and the
+    unit distance is 1/20 of the mesh's diagonal (:func:`~tetvr.transfer.default_unit_distance`).
+    Each can be given instead; ``preset`` is any name :func:`tetvr.colormaps.colormap`
+    takes (tetvr's presets, matplotlib's colormaps).
+
+    Examples
+    --------
+    >>> from tetvr import synthetic
+    >>> tf = default_transfer_function(synthetic.cube(2), preset="hot")
+    >>> tf.opacity[0][1], tf.opacity[-1][1]  # transparent at the bottom of the range, 0.9 at the top
+    (0.0, 0.9)
+    """
+    from .colormaps import colormap
+
+    # robust_range widens a constant field's range as _tf_range does; a given range is the caller's.
+    rng = robust_range(mesh.scalars, point_weights(mesh.points, mesh.tets)) if scalar_range is None else scalar_range
+    u = default_unit_distance(mesh.bounds) if unit_distance is None else unit_distance
+    op = DEFAULT_OPACITY_RAMP if opacity is None else opacity
+    if opacity is None and scalar_range is None and mesh.scalar_range[0] == mesh.scalar_range[1]:
+        # A constant field sits at the bottom of its widened range, where the ramp is
+        # transparent: show it at the ramp's top opacity instead of hiding it.
+        op = DEFAULT_OPACITY_RAMP[-1][1]
+    return colormap(preset, rng, opacity=op, unit_distance=u)  # type: ignore[arg-type]
+
+
+def _paraview_unit(mesh: TetMesh) -> float:
+    from .paraview import paraview_unit_distance
+
+    return paraview_unit_distance(mesh.bounds, mesh.n_tets)
+
+
+def _warn_if_invisible(mesh: TetMesh, tf: TransferFunction) -> None:
+    """Warn when the most opaque value would still be nearly transparent across the whole
+    mesh: a unit distance in other units than the mesh's (1.0 on a 2 cm mesh, say)."""
+    a_max = max(a for _, a in tf.opacity)
+    if a_max <= 0.0 or a_max >= 1.0:
+        return  # transparent on purpose, or opaque at any thickness
     diag = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
-    return TransferFunction.preset(preset, (lo, hi), opacity=opacity, unit_distance=max(diag / 20.0, 1e-30))
+    alpha = -np.expm1(diag / tf.unit_distance * np.log1p(-a_max))
+    if alpha < 0.05:
+        warnings.warn(
+            f"the picture will be nearly blank: at most {alpha:.2g} opacity across the whole mesh (its diagonal is "
+            f"{diag:.3g}, the transfer function's unit_distance {tf.unit_distance:.3g}); give a unit_distance in the "
+            f"mesh's units, e.g. TransferFunction.preset(..., mesh=mesh) or unit_distance={diag / 20:.3g}",
+            stacklevel=3)
 
 
 def render(
@@ -62,8 +115,11 @@ def render(
     Parameters
     ----------
     mesh : the tetrahedral mesh (see :func:`tetvr.read`).
-    camera : defaults to :meth:`Camera.fit`.
-    tf : defaults to :func:`default_transfer_function`.
+    camera : defaults to :meth:`Camera.fit`; a camera whose clipping range leaves none of
+        the mesh visible is warned about (:func:`tetvr.camera.check_clipping_range`).
+    tf : defaults to :func:`default_transfer_function` (the data-driven default); a
+        function that would leave the picture nearly blank is warned about. With
+        ``settings.optics == "vtk"`` (VTK parity) its unit distance is ParaView's default.
     size : (width, height).
     settings : GPU method settings.
     method : ``"gpu"`` (projected tetrahedra through OpenGL) or ``"reference"`` (the
@@ -80,8 +136,16 @@ def render(
                              ("settings", settings, RenderSettings)):
         if value is not None and not isinstance(value, cls):
             raise TypeError(f"{name} must be a {cls.__name__} or None, got {type(value).__name__}")
-    camera = camera or Camera.fit(mesh)
-    tf = tf or default_transfer_function(mesh)
+    if camera is None:
+        camera = Camera.fit(mesh)
+    else:
+        check_clipping_range(camera, mesh.points, stacklevel=2)  # a blank picture is said, not silent
+    if tf is None:
+        parity = settings is not None and settings.optics == "vtk"
+        # VTK parity: ParaView's default unit distance (diagonal / cube root of the cells).
+        tf = default_transfer_function(mesh, unit_distance=_paraview_unit(mesh) if parity else None)
+    else:
+        _warn_if_invisible(mesh, tf)
     if method == "reference":
         from .reference import render_reference
 

@@ -6,18 +6,28 @@ Schema (keys other than these are rejected; paths are relative to the JSON file)
       "mesh": "post.vtk",                 # any meshio-readable file            (required)
       "scalars": "Pressure",              # point or cell field; default: the first
       "component": null,                  # vector fields: null = magnitude, or an index
-      "transfer_function": {              # either a preset ...
-          "preset": "viridis", "range": null, "opacity": 0.5, "unit_distance": null
+      "transfer_function": {              # either a colour map (tetvr's or matplotlib's) ...
+          "preset": "viridis", "range": null, "opacity": null, "unit_distance": null
       },                                  # ... or explicit {"color", "opacity", "unit_distance"}
       "camera": {"fit": {"direction": [-1, -0.6, -1.2], "parallel": false}},
-                                          # ... or explicit Camera fields (position, ...)
+                                          # ... or explicit Camera fields (position, ...);
+                                          # without clipping_range: computed from the data
+                                          # as ParaView does (camera.reset_clipping_range)
       "size": [512, 512],
       "background": [1, 1, 1],            # for PNG output; the float image is translucent
       "settings": {}                      # RenderSettings fields
     }
 
-``range: null`` takes the field's range; ``unit_distance: null`` takes 1/20 of the mesh's
-bounding-box diagonal. :meth:`Scene.to_dict` writes the resolved, explicit form.
+Each ``null`` (or absent key) takes the default rule's part
+(:func:`tetvr.render.default_transfer_function`): ``range`` the 1st..99.5th percentile of
+the field weighted by volume, ``opacity`` a quadratic ramp across it, ``unit_distance``
+1/20 of the mesh's bounding-box diagonal -- or, with ``"settings": {"optics": "vtk"}`` (VTK
+parity), ParaView's default, the diagonal over the cube root of the cell count (also
+asked for by ``"unit_distance": "paraview"``, in either form). ``"log_scale": true`` (either
+form) interpolates colour and opacity in log10 of the scalar, as ParaView's "Use Log Scale"
+(:meth:`~tetvr.transfer.TransferFunction.log_scaled`). :meth:`Scene.to_dict` writes the
+resolved, explicit form. A ParaView state file (``.pvsm``) loads as a scene too
+(:mod:`tetvr.paraview`).
 """
 
 from __future__ import annotations
@@ -30,11 +40,11 @@ from typing import Any
 
 import numpy as np
 
-from .camera import Camera
+from .camera import Camera, reset_clipping_range
 from .image import atomic_output, image_size
 from .mesh import TetMesh, read
 from .preintegrate import check_unit_distance
-from .render import _tf_range, default_transfer_function
+from .render import default_transfer_function
 from .settings import RenderSettings
 from .transfer import TransferFunction
 
@@ -56,6 +66,9 @@ class Scene:
     settings: RenderSettings = RenderSettings()
     scalars: str | None = None
     component: int | None = None
+    #: True when the transfer function's unit distance came from tetvr's default rule (the
+    #: scene left it null): :func:`tetvr.vtkcompare.compare` then uses ParaView's default.
+    unit_distance_default: bool = False
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], base_dir: str | os.PathLike[str] = ".") -> "Scene":
@@ -83,10 +96,14 @@ class Scene:
         settings = RenderSettings.from_dict(settings_spec)
         path = Path(base_dir) / data["mesh"]
         mesh = read(path, scalars, component=component)
-        tf = _transfer_function(data.get("transfer_function", {"preset": "viridis"}), mesh)
+        tf_spec = data.get("transfer_function", {"preset": "viridis"})
+        tf = _transfer_function(tf_spec, mesh, settings)
         camera = _camera(data.get("camera", {"fit": {}}), mesh)
+        defaulted = isinstance(tf_spec, dict) and "preset" in tf_spec and tf_spec.get("unit_distance") is None \
+            and settings.optics != "vtk"
         return cls(mesh_path=str(path), mesh=mesh, tf=tf, camera=camera, size=size,  # type: ignore[arg-type]
-                   background=bg, settings=settings, scalars=mesh.scalar_name, component=component)  # type: ignore[arg-type]
+                   background=bg, settings=settings, scalars=mesh.scalar_name, component=component,  # type: ignore[arg-type]
+                   unit_distance_default=defaulted)
 
     def to_dict(self, relative_to: str | os.PathLike[str] | None = None) -> dict[str, Any]:
         mesh_path = self.mesh_path if relative_to is None else os.path.relpath(self.mesh_path, relative_to)
@@ -116,7 +133,12 @@ class Scene:
 
 
 def load_scene(path: str | os.PathLike[str]) -> Scene:
-    """Read a scene JSON file (see the module docstring for the schema)."""
+    """Read a scene JSON file (see the module docstring for the schema), or a ParaView
+    state file (``.pvsm``, :func:`tetvr.paraview.load_state`)."""
+    if Path(path).suffix.lower() == ".pvsm":
+        from .paraview import load_state
+
+        return load_state(path)  # type: ignore[no-any-return]
     if os.path.isdir(path):
         raise ValueError(f"{path}: is a directory, not a scene JSON file")
     try:
@@ -157,9 +179,24 @@ def _background(value: Any) -> tuple[float, float, float]:
     return float(bg[0]), float(bg[1]), float(bg[2])
 
 
-def _transfer_function(spec: dict[str, Any], mesh: TetMesh) -> TransferFunction:
+def _transfer_function(spec: dict[str, Any], mesh: TetMesh, settings: RenderSettings | None = None) -> TransferFunction:
     if not isinstance(spec, dict):
         raise ValueError(f"transfer_function must be an object, got {spec!r}")
+    spec = dict(spec)
+    log_scale = spec.pop("log_scale", False)
+    if not isinstance(log_scale, bool):
+        raise ValueError(f"transfer_function 'log_scale' must be true or false, got {log_scale!r}")
+    # ParaView's default unit distance: asked for by name, or implied by VTK parity (optics "vtk").
+    if spec.get("unit_distance") == "paraview" or (
+            "preset" in spec and spec.get("unit_distance") is None and settings is not None and settings.optics == "vtk"):
+        from .paraview import paraview_unit_distance
+
+        spec["unit_distance"] = paraview_unit_distance(mesh.bounds, mesh.n_tets)
+    tf = _tf_from_spec(spec, mesh)
+    return tf.log_scaled() if log_scale else tf
+
+
+def _tf_from_spec(spec: dict[str, Any], mesh: TetMesh) -> TransferFunction:
     if "preset" not in spec:
         tf = TransferFunction.from_dict(spec)
         check_unit_distance(tf.unit_distance, "transfer_function 'unit_distance'")
@@ -167,17 +204,14 @@ def _transfer_function(spec: dict[str, Any], mesh: TetMesh) -> TransferFunction:
     unknown = set(spec) - {"preset", "range", "opacity", "unit_distance"}
     if unknown:
         raise ValueError(f"unknown transfer_function keys {sorted(unknown)}")
-    base = default_transfer_function(mesh)
     rng = spec.get("range")
-    if rng is None:
-        rng = _tf_range(*mesh.scalar_range)  # a (numerically) constant field: a small range above it
-    elif not (isinstance(rng, (list, tuple)) and len(rng) == 2):
+    if rng is not None and not (isinstance(rng, (list, tuple)) and len(rng) == 2):
         raise ValueError(f"transfer_function 'range' must be [lo, hi] or null, got {rng!r}")
-    # 0 is not "unset": only null takes the default (TransferFunction rejects 0).
-    u = spec.get("unit_distance")
-    if u is None:
-        u = base.unit_distance
-    tf = TransferFunction.preset(spec["preset"], tuple(rng), opacity=spec.get("opacity", 0.5), unit_distance=u)
+    if not isinstance(spec["preset"], str):
+        raise ValueError(f"transfer_function 'preset' must be a colour-map name, got {spec['preset']!r}")
+    # null (or absent) takes the default rule's part (tetvr.transfer); 0 is not "unset".
+    tf = default_transfer_function(mesh, preset=spec["preset"], opacity=spec.get("opacity"),
+                                   scalar_range=None if rng is None else tuple(rng), unit_distance=spec.get("unit_distance"))
     check_unit_distance(tf.unit_distance, "transfer_function 'unit_distance'")
     return tf
 
@@ -196,7 +230,10 @@ def _camera(spec: dict[str, Any], mesh: TetMesh) -> Camera:
         if unknown:
             raise ValueError(f"unknown camera.fit keys {sorted(unknown)}; allowed: {sorted(allowed)}")
         return Camera.fit(mesh, **fit)
-    return Camera.from_dict(spec)
+    camera = Camera.from_dict(spec)
+    if "clipping_range" not in spec:  # as ParaView: computed from the data (a state stores none)
+        camera = reset_clipping_range(camera, mesh.bounds)
+    return camera
 
 
 def demo_scene_path() -> Path:

@@ -10,12 +10,85 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["TransferFunction", "PRESETS"]
+__all__ = ["TransferFunction", "PRESETS", "DEFAULT_OPACITY_RAMP", "DEFAULT_PERCENTILES", "DEFAULT_UNIT_FRACTION",
+           "robust_range", "default_unit_distance", "point_weights"]
+
+# ---- the default rule: one place, used by preset(mesh), render(), the scene JSON and the CLI ----
+#: Percentiles (of the field, weighted by the volume each point stands for) that span the
+#: default colour and opacity range: a few extreme cells (a shock, a singular corner)
+#: do not squeeze the rest of the field into one colour.
+DEFAULT_PERCENTILES = (1.0, 99.5)
+#: The default opacity ramp, ``(t, a)`` across the range: quadratic, so the bulk of the
+#: field (often near its low end: free stream, ambient) stays a faint context and high
+#: values stand out. Below the range is transparent; above it, as opaque as the top, 0.9:
+#: an opacity of 1 is an infinite extinction, which the pre-integration table can only
+#: approximate (0.1 of alpha off on a stress field's hot spot at the top 1.0, 1.6e-3 at 0.9).
+DEFAULT_OPACITY_RAMP: tuple[tuple[float, float], ...] = tuple((t, 0.9 * t * t) for t in (0.0, 0.25, 0.5, 0.75, 1.0))
+#: The default unit distance as a fraction of the bounding-box diagonal: the picture
+#: looks the same whether the mesh is measured in metres or micrometres.
+DEFAULT_UNIT_FRACTION = 1.0 / 20.0
+
+
+def point_weights(points: ArrayLike, tets: ArrayLike) -> NDArray[np.float64]:
+    """The volume each point stands for: a quarter of the volume of every tet around it
+    (the lumped mass), so that statistics of a point field do not favour refined regions.
+
+    >>> point_weights([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 1, 2, 3]]).tolist()
+    [0.041666666666666664, 0.041666666666666664, 0.041666666666666664, 0.041666666666666664]
+    """
+    p = np.asarray(points, dtype=np.float64)
+    t = np.asarray(tets, dtype=np.int64)
+    q = p[t]
+    vol = np.abs(np.einsum("ij,ij->i", np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]), q[:, 3] - q[:, 0])) / 6.0
+    return np.bincount(t.ravel(), weights=np.repeat(vol / 4.0, 4), minlength=p.shape[0]).astype(np.float64)
+
+
+def robust_range(values: ArrayLike, weights: ArrayLike | None = None,
+                 percentiles: tuple[float, float] = DEFAULT_PERCENTILES) -> tuple[float, float]:
+    """The ``percentiles`` of ``values`` (weighted by ``weights``), widened to the full
+    range where they coincide (a field that is mostly one value), and to a small interval
+    above a constant field, so that ``lo < hi`` always.
+
+    >>> [round(v, 2) for v in robust_range(np.r_[np.linspace(0, 1, 1001), 1000.0])]  # not set by an outlier
+    [0.01, 1.0]
+    >>> robust_range([3.0, 3.0, 3.0])
+    (3.0, 3.003)
+    """
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    if v.size == 0 or not np.all(np.isfinite(v)):
+        raise ValueError("robust_range needs finite values")
+    w = np.ones_like(v) if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
+    if w.shape != v.shape or np.any(w < 0) or not np.all(np.isfinite(w)):
+        raise ValueError(f"weights must be finite, non-negative and one per value, got shape {w.shape}")
+    if not w.sum() > 0:
+        w = np.ones_like(v)
+    order = np.argsort(v, kind="stable")
+    v, w = v[order], w[order]
+    # The weighted percentile: the value at which the cumulative weight (midpoints) passes q.
+    cum = (np.cumsum(w) - 0.5 * w) / w.sum()
+    lo, hi = (float(np.interp(q / 100.0, cum, v)) for q in percentiles)
+    if not hi > lo:
+        lo, hi = float(v[0]), float(v[-1])
+    # As render's _tf_range: a range the GPU's float32 scalars can resolve.
+    if hi - lo <= 1e-5 * max(abs(lo), abs(hi)):
+        hi = lo + max(abs(lo), 1.0) * 1e-3
+    return lo, hi
+
+
+def default_unit_distance(bounds: ArrayLike) -> float:
+    """:data:`DEFAULT_UNIT_FRACTION` of the diagonal of ``bounds`` (a ``(2, 3)`` box).
+
+    >>> default_unit_distance([(0, 0, 0), (3, 4, 0)])
+    0.25
+    """
+    lo, hi = np.asarray(bounds, dtype=np.float64).reshape(2, 3)
+    return max(float(np.linalg.norm(hi - lo)) * DEFAULT_UNIT_FRACTION, 1e-30)
 
 # Colour presets sampled on [0, 1]: (position, r, g, b).
 PRESETS: dict[str, tuple[tuple[float, float, float, float], ...]] = {
@@ -110,15 +183,46 @@ class TransferFunction:
     def preset(
         cls,
         name: str,
-        scalar_range: tuple[float, float],
+        scalar_range: Any = None,
         *,
-        opacity: float | Sequence[tuple[float, float]] = 0.5,
-        unit_distance: float = 1.0,
+        opacity: float | Sequence[tuple[float, float]] | None = None,
+        unit_distance: float | None = None,
+        mesh: Any = None,
     ) -> "TransferFunction":
         """A named colour map stretched over ``scalar_range``.
 
-        ``opacity`` is a constant, or ``(t, a)`` rows with ``t`` in [0, 1] across the range.
+        Parameters
+        ----------
+        name : one of :data:`PRESETS` (see :func:`tetvr.colormaps.colormap` for matplotlib's).
+        scalar_range : ``(lo, hi)``; or a :class:`~tetvr.TetMesh`, passed as ``mesh``.
+        opacity : a constant, or ``(t, a)`` rows with ``t`` in [0, 1] across the range.
+            Default: :data:`DEFAULT_OPACITY_RAMP` with a mesh, else a constant 0.5.
+        unit_distance : world length over which ``a`` is reached. Default:
+            :func:`default_unit_distance` of the mesh's bounds with a mesh, else 1.0
+            (in the mesh's own units: give a mesh, or a length, for meshes far from unit size).
+        mesh : the mesh the function is for: the range defaults to the :func:`robust_range`
+            of its field (weighted by volume) and the unit distance to its size.
+
+        Examples
+        --------
+        >>> from tetvr import synthetic
+        >>> tf = TransferFunction.preset("viridis", synthetic.cube(2))  # the default rule
+        >>> tf.opacity[-1][1], round(tf.unit_distance, 4)
+        (0.9, 0.1268)
         """
+        if mesh is None and all(hasattr(scalar_range, a) for a in ("points", "tets", "scalars", "bounds")):
+            mesh, scalar_range = scalar_range, None
+        if mesh is not None:
+            if scalar_range is None:
+                scalar_range = robust_range(mesh.scalars, point_weights(mesh.points, mesh.tets))
+            if unit_distance is None:
+                unit_distance = default_unit_distance(mesh.bounds)
+            if opacity is None:
+                opacity = DEFAULT_OPACITY_RAMP
+        if scalar_range is None:
+            raise ValueError("scalar_range is needed: (lo, hi), or a mesh to take it from")
+        opacity = 0.5 if opacity is None else opacity
+        unit_distance = 1.0 if unit_distance is None else unit_distance
         if name not in PRESETS:
             raise ValueError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}")
         try:
@@ -181,3 +285,50 @@ class TransferFunction:
     def digest(self) -> str:
         """A stable hash of the function, used to cache pre-integration tables."""
         return hashlib.sha1(json.dumps(self.to_dict(), sort_keys=True).encode()).hexdigest()[:16]
+
+    def log_scaled(self, *, color: bool = True, opacity: bool = True, tolerance: float = 1e-4) -> "TransferFunction":
+        """The same control points interpolated in ``log10`` of the scalar (ParaView's
+        "Use Log Scale"), as a piecewise-linear function of the scalar itself.
+
+        Between two control points ``x0 < x1`` the value is linear in ``log x``. The field
+        is not changed (it stays linear in each cell, which the renderer and the reference
+        integrate exactly); the curve is followed by linear pieces between geometrically
+        spaced points, as many as keep it within ``tolerance`` of the curve (a colour
+        change of 1 over three decades takes ~90 pieces at the default 1e-4). Every
+        control point must be positive; scalars below the first point still take its value.
+
+        Examples
+        --------
+        >>> tf = TransferFunction(color=((1, 0, 0, 0), (100, 1, 1, 1)), opacity=((1, 0.5), (100, 0.5)))
+        >>> round(float(tf.log_scaled().evaluate([10.0])[0][0, 0]), 4)  # halfway in log10
+        0.5
+        """
+        if not (isinstance(tolerance, (int, float)) and 0 < tolerance < 1):
+            raise ValueError(f"tolerance must be a number in (0, 1), got {tolerance!r}")
+        return dataclasses.replace(
+            self,
+            color=_log_pieces(self.color, tolerance, "color") if color else self.color,
+            opacity=_log_pieces(self.opacity, tolerance, "opacity") if opacity else self.opacity)
+
+
+def _log_pieces(rows: Any, tolerance: float, name: str) -> Any:
+    """Control points ``rows`` (x, values...) interpolated linearly in log x, as linear
+    pieces in x: on [a, a e^r] the chord of a function linear in ln x strays from it by
+    at most ~|change| r / 8, so a segment spanning ln(x1/x0) = L with a change dv needs
+    n = sqrt(dv L / (8 tolerance)) pieces of ratio e^(L/n)."""
+    arr = np.asarray(rows, dtype=np.float64)
+    if np.any(arr[:, 0] <= 0):
+        raise ValueError(f"a log scale needs positive {name} control points, got positions from {arr[0, 0]!r} "
+                         f"(ParaView refuses a log scale over a range reaching 0 too); shift the field or the range")
+    out = [arr[:1]]
+    for a, b in zip(arr[:-1], arr[1:]):
+        span = math.log(b[0] / a[0])
+        change = float(np.max(np.abs(b[1:] - a[1:])))
+        n = min(4096, max(1, math.ceil(math.sqrt(change * span / (8.0 * tolerance)))))
+        t = np.arange(1, n + 1) / n
+        xs = a[0] * np.exp(span * t)
+        xs[-1] = b[0]  # the control point itself, exactly
+        out.append(np.column_stack([xs, a[1:] + np.outer(t, b[1:] - a[1:])]))
+    pts = np.concatenate(out)
+    keep = np.concatenate([[True], np.diff(pts[:, 0]) > 0])  # rounding may merge the tiniest pieces
+    return tuple(tuple(float(v) for v in row) for row in pts[keep])

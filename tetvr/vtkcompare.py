@@ -494,6 +494,11 @@ def compare(
     references : conventions of the CPU reference to measure against (``"exact"``
         first; ``"linear"`` and ``"vtk"`` show which convention each renderer follows).
     outdir : if given, :func:`write_report` writes the pictures and tables there.
+
+    A scene that leaves the transfer function's unit distance to the default
+    (``"unit_distance": null``, :attr:`Scene.unit_distance_default`) is compared with
+    ParaView's default unit distance (:func:`tetvr.paraview.paraview_unit_distance`), the
+    one a ParaView user gets, for every renderer alike.
     log : called with a line of progress per method (e.g. ``print``).
 
     Returns
@@ -527,6 +532,17 @@ def compare(
     say = log or (lambda line: None)
     width, height = (int(v) for v in (size or scene.size))
     size = (width, height)
+    unit_from = "the scene"
+    if getattr(scene, "unit_distance_default", False):
+        # The scene left the unit distance to tetvr's default (diagonal / 20): compare what a
+        # ParaView user sees, ParaView's default (diagonal / cube root of the cells), everywhere.
+        from .paraview import paraview_unit_distance
+
+        u = paraview_unit_distance(scene.mesh.bounds, scene.mesh.n_tets)
+        scene = dataclasses.replace(scene, tf=dataclasses.replace(scene.tf, unit_distance=u),
+                                    unit_distance_default=False)
+        unit_from = "ParaView's default (bounding-box diagonal / cube root of the cell count)"
+        say(f"unit distance: {u:.6g}, {unit_from}; the scene left it to the default")
     mesh, tf, camera = scene.mesh, scene.tf, scene.camera
     cams = [orbit(camera, azimuth_step * (i + 1)) for i in range(views)]
 
@@ -582,6 +598,7 @@ def compare(
         say(f"{meth.label}: first {meth.first_frame_s:.3f} s, view change {statistics.median(meth.view_change_s):.3f} s")
 
     result = _table(scene, size, views, azimuth_step, methods, refs, vtk_info)
+    result["scene"]["unit_distance_from"] = unit_from
     if outdir is not None:
         write_report(result, outdir, images={m.key: m.image for m in methods if m.image is not None})
     return result

@@ -39,7 +39,7 @@ from .camera import Camera, bounding_sphere
 from .image import png_bytes as _png_bytes
 from .image import to_rgba8
 from .mesh import TetMesh
-from .render import _tf_range
+from .render import default_transfer_function
 from .scene import Scene, load_scene
 from .settings import RenderSettings
 from .transfer import PRESETS, TransferFunction
@@ -541,7 +541,7 @@ class ViewerModel:
         self.mesh = new
         self.field = name
         self.component = None
-        self.editor.set_range(*_tf_range(*new.scalar_range))  # a constant field: as default_transfer_function
+        self.editor.set_range(*default_transfer_function(new).domain)  # the default rule's range (tetvr.transfer)
 
     def set_colormap(self, name: str) -> None:
         self.editor.set_colormap(name)

@@ -32,11 +32,22 @@ from ..mesh import TetMesh
 if TYPE_CHECKING:
     from .renderer import Renderer
 
-__all__ = ["Marcher", "MarchStats"]
+__all__ = ["Marcher", "MarchStats", "raymarch_capacity"]
 
 #: Most entry layers per frame: a ray leaving and entering the mesh more often than this
 #: (a mesh of many separate shells seen edge-on) stops there; the count is in the stats.
 MAX_LAYERS = 64
+
+
+def _layout(max_texture_size: int) -> tuple[int, int]:
+    """Tets per row of the records texture and of the mates texture."""
+    return max(1, min(max_texture_size // RECORD_TEXELS, 4096)), min(max_texture_size, 8192)
+
+
+def raymarch_capacity(max_texture_size: int) -> int:
+    """The most tets whose records fit one texture of a GL with this GL_MAX_TEXTURE_SIZE."""
+    per_row, mates_width = _layout(max_texture_size)
+    return min(per_row, mates_width) * max_texture_size
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,9 +117,8 @@ class Marcher:
                           f"overlap in space); tet marching follows faces and renders it wrong: use "
                           f"method=\"projected\" (\"auto\" does)", RuntimeWarning, stacklevel=4)
         max_tex = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
-        tets_per_row = max(1, min(max_tex // RECORD_TEXELS, 4096))
+        tets_per_row, mates_width = _layout(max_tex)
         rows = -(-mesh.n_tets // tets_per_row)
-        mates_width = min(max_tex, 8192)
         mates_rows = -(-mesh.n_tets // mates_width)
         if rows > max_tex or mates_rows > max_tex:
             raise MemoryError(f"the ray caster holds at most {tets_per_row * max_tex} tets in one texture on this GL "
@@ -167,6 +177,18 @@ class Marcher:
 
     # ---- the frame ----
     def render(self, mesh: TetMesh, camera: Camera, size: tuple[int, int], uniforms: dict[str, Any],
+               table_uniforms: dict[str, Any], defines: dict[str, int], clock: Any) -> NDArray[np.float32]:
+        """Premultiplied RGBA, (height, width, 4), row 0 at the top."""
+        return self._frame(mesh, camera, size, uniforms, table_uniforms, dict(defines, EXTENT=0), clock)
+
+    def extent(self, mesh: TetMesh, camera: Camera, size: tuple[int, int], uniforms: dict[str, Any],
+               clock: Any) -> NDArray[np.float32]:
+        """Per pixel (first entry depth, last exit depth, segments walked, 0); (3e38, -3e38)
+        where no ray enters the mesh."""
+        defines = dict(TABLE_NORMALIZED=1, TABLE_CUBIC=0, EXTENT=1)
+        return self._frame(mesh, camera, size, uniforms, {}, defines, clock)
+
+    def _frame(self, mesh: TetMesh, camera: Camera, size: tuple[int, int], uniforms: dict[str, Any],
                table_uniforms: dict[str, Any], defines: dict[str, int], clock: Any) -> NDArray[np.float32]:
         import moderngl
 

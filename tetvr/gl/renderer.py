@@ -1,10 +1,13 @@
-"""The GPU projected-tetrahedra renderer: one object owns the context and all GL objects.
+"""The GPU renderer: one object owns the context and all GL objects, for both methods.
 
-Per mesh (once): points and tets go to shader storage buffers. Per transfer function
-(once): the pre-integration table goes to a 3D texture. Per view: ``classify.comp``
-writes every tet's fan, the CPU sorts the cells and uploads the order, one draw call
-expands the fans into triangles (``tet.vert``) whose fragments look up the table
-(``tet.frag``) and blend back to front into an RGBA32F target, which is read back.
+Projected tetrahedra (``method="projected"``). Per mesh (once): points and tets go to
+shader storage buffers. Per transfer function (once): the pre-integration table goes to a
+3D texture. Per view: the CPU sorts the cells and uploads the order; ``classify.comp``
+classifies the cells in drawing order and writes each one's finished fan vertices into a
+vertex buffer; one draw call per batch passes them through (``tet.vert``) to fragments that
+look up the table (``tet.frag``) and blend back to front into an RGBA32F target, which is
+read back. Tet marching (``method="raymarch"``, the default through ``"auto"``) is
+:mod:`tetvr.gl.raymarch` on the same context and table; :func:`tetvr.method.choose` picks.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from ..camera import Camera
 from ..mesh import TetMesh
 from ..preintegrate import PreintegrationTable, table_for
 from ..tablesize import resolve as resolve_table_size, segment_sample
+from ..precision import check_view_precision
 from ..render import check_float32_range
 from ..settings import RenderSettings
 from ..cull import gpu_scalar_margin, visible_cells
@@ -27,19 +31,28 @@ from ..transfer import TransferFunction
 from .context import create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
 from ..method import choose
-from .raymarch import Marcher
+from .raymarch import Marcher, raymarch_capacity
 from .util import Clock, GLOwner, check_size, gl_locked, locked, set_uniforms, table_texture
 
 __all__ = ["Renderer", "FrameStats"]
 
-_FAN_BYTES = 48  # sizeof(TetFan) in std430
+#: Per-tet bytes a chunk may need in one storage-buffer binding: the chunk limit (the tets
+#: buffer needs 16; the fan vertices are bound in ranges). 48 was sizeof(TetFan), the fans of
+#: the path before classify.comp wrote finished vertices; kept so chunking is unchanged.
+_FAN_BYTES = 48
+#: One fan vertex as classify.comp writes it (common.glsl's FanVertex): uvec4(ndc.xy, exact
+#: tet, 0), then the segment; 5 per tet. The attributes of tet.vert: (name, class, format, offset).
+_FAN_VERTEX_BYTES = 32
+_FAN_ATTRIBUTES = (("in_ndc", "f", "2f", 0), ("in_exact", "i", "1i", 8), ("in_segment", "f", "4f", 16))
 _GROUP = 64  # classify.comp local size
 _MAX_GROUPS = 65535
 #: Most tets per draw call; the index buffer holds at most this many fan patterns (3 MiB).
 _DRAW_BATCH = 65_536
 #: tet.vert's fan of one tet: 4 triangles over its 5 vertices (0 the thick vertex).
 _FAN_PATTERN = np.array([0, 1, 2, 0, 2, 3, 0, 3, 4, 0, 4, 1], dtype=np.uint32)
-_DEFAULT_CHUNK = 2_000_000  # tets per chunk: 96 MB of fans, under llvmpipe's 128 MB SSBO limit
+#: Tets per chunk: 96 MB of fan vertices (160 B a tet), which keeps host memory bounded for
+#: meshes of millions of tets (bench/memory.py) on llvmpipe, whose buffers live there.
+_DEFAULT_CHUNK = 600_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -215,24 +228,25 @@ class Renderer(GLOwner):
         else:
             tets = self.ctx.buffer(np.ascontiguousarray(mesh.tets, dtype=np.int32).tobytes())
         self._mesh_buffers = [points, tets]
-        self._fans = self.ctx.buffer(reserve=max(chunk, 1) * _FAN_BYTES)
+        # Written by classify.comp, read as vertex attributes: 5 finished vertices per tet.
+        self._fans = self.ctx.buffer(reserve=max(chunk, 1) * 5 * _FAN_VERTEX_BYTES)
         self._order = self.ctx.buffer(reserve=max(chunk, 1) * 4)
         if self._chunked:
             self._order.write(np.arange(chunk, dtype=np.uint32).tobytes())
         self._mesh = mesh
 
-    def _chunks(self, mesh: TetMesh, order: NDArray[np.uint32]) -> Iterator[tuple[int, int]]:
+    def _chunks(self, mesh: TetMesh, order: NDArray[np.uint32]) -> Iterator[int]:
         """Make each chunk of the drawing order current in turn; yields the number of
-        cells to classify and to draw.
+        cells to classify and draw, which classify.comp finds through the order buffer.
 
-        Unchunked meshes are one chunk: all cells are classified, the order buffer holds
-        the order (which may list a subset: the cells left after culling). Chunked meshes
-        get the cells of each chunk uploaded in drawing order, with an identity order.
+        Unchunked meshes are one chunk: the order buffer holds the order (which may list a
+        subset: the cells left after culling, or an explicit order). Chunked meshes get the
+        cells of each chunk uploaded in drawing order, with an identity order.
         """
         if not self._chunked:
             self._order.write(np.ascontiguousarray(order, dtype=np.uint32).tobytes())
             self._clock.lap("order_upload")
-            yield mesh.n_tets, int(order.shape[0])
+            yield int(order.shape[0])
             return
         for first in range(0, int(order.shape[0]), self.chunk_tets):
             ids = order[first:first + self.chunk_tets]
@@ -244,7 +258,7 @@ class Renderer(GLOwner):
                 self.ctx.finish()
             self._mesh_buffers[1].write(np.ascontiguousarray(mesh.tets[ids], dtype=np.int32).tobytes())
             self._clock.lap("order_upload")
-            yield int(ids.shape[0]), int(ids.shape[0])
+            yield int(ids.shape[0])
 
     def _use_table(self, table: PreintegrationTable) -> None:
         if table is self._table:
@@ -307,23 +321,32 @@ class Renderer(GLOwner):
                     u_half_px=(size[0] / 2.0, size[1] / 2.0),
                     u_near=near, u_far=far, u_ray_scale=(1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1])))
 
-    def _classify(self, n_tets: int, uniforms: dict[str, Any], *, count_exact: bool = False) -> int:
-        """Run classify.comp over the tets in the tets buffer; with ``count_exact``, return
-        how many fans take the exact per-fragment path (a 4-byte read that waits for the
-        classification), else 1."""
-        classify = self._program("classify")
+    def _classify(self, n_tets: int, uniforms: dict[str, Any], *, perspective_correct: int,
+                  count_exact: bool = False) -> int:
+        """Run classify.comp over the first ``n_tets`` drawing positions of the order
+        buffer: it writes their fans' vertices in drawing order. With ``count_exact``,
+        return how many fans take the exact per-fragment path (a 4-byte read that waits for
+        the classification), else 1. ``uniforms`` holds the view's and, for the render, the
+        table's (the vertices carry table coordinates)."""
+        classify = self._program("classify", PERSPECTIVE_CORRECT=perspective_correct)
         set_uniforms(classify, u_count=n_tets, **uniforms)
         if self._exact_count is None:
             self._exact_count = self.ctx.buffer(reserve=4)
         self._exact_count.write(b"\0\0\0\0")
         self._mesh_buffers[0].bind_to_storage_buffer(0)
         self._mesh_buffers[1].bind_to_storage_buffer(1)
-        self._fans.bind_to_storage_buffer(2)
+        self._order.bind_to_storage_buffer(3)
         self._exact_count.bind_to_storage_buffer(4)
-        groups = (n_tets + _GROUP - 1) // _GROUP
-        for first in range(0, groups, _MAX_GROUPS):
-            set_uniforms(classify, u_offset=first * _GROUP)
-            classify.run(min(_MAX_GROUPS, groups - first))
+        # A chunk's fan vertices (160 B/tet) may exceed one storage-buffer binding: bind them
+        # in ranges. A whole number of groups per range keeps each offset a multiple of
+        # 64 * 160 B, which meets any GL's offset alignment.
+        per_tet = 5 * _FAN_VERTEX_BYTES
+        step = min(_MAX_GROUPS, max(self._max_ssbo // (per_tet * _GROUP), 1)) * _GROUP
+        for first in range(0, n_tets, step):
+            count = min(step, n_tets - first)
+            self._fans.bind_to_storage_buffer(2, offset=first * per_tet, size=count * per_tet)
+            set_uniforms(classify, u_offset=first)
+            classify.run((count + _GROUP - 1) // _GROUP)
         n_exact = 1
         if count_exact:
             self.ctx.memory_barrier()
@@ -335,11 +358,10 @@ class Renderer(GLOwner):
         import moderngl
 
         fbo.use()
+        # The exact per-fragment path reads the mesh (tet.frag, depth.frag).
         self._mesh_buffers[0].bind_to_storage_buffer(0)
         self._mesh_buffers[1].bind_to_storage_buffer(1)
-        self.ctx.memory_barrier()
-        self._fans.bind_to_storage_buffer(2)
-        self._order.bind_to_storage_buffer(3)
+        self.ctx.memory_barrier()  # classify.comp's vertices -> the vertex fetch
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func, self.ctx.blend_equation = blend
@@ -348,8 +370,13 @@ class Renderer(GLOwner):
         if vao is None:
             vao = self._vaos[id(prog)] = self.ctx.vertex_array(prog, [], index_buffer=self._fan_indices,
                                                                index_element_size=4)
+        attributes = [(prog[name].location, cls, fmt, offset) for name, cls, fmt, offset in _FAN_ATTRIBUTES
+                      if name in prog]  # the floor shader reads no segment
         for first in range(0, n_tets, _DRAW_BATCH):
-            set_uniforms(prog, u_first=first)
+            # The index pattern counts from 0: each batch points the attributes at its first tet.
+            base = first * 5 * _FAN_VERTEX_BYTES
+            for location, cls, fmt, offset in attributes:
+                vao.bind(location, cls, self._fans, fmt, offset=base + offset, stride=_FAN_VERTEX_BYTES)
             vao.render(moderngl.TRIANGLES, vertices=12 * min(_DRAW_BATCH, n_tets - first))
         self.ctx.disable(moderngl.BLEND)
         self._clock.lap("draw")
@@ -417,10 +444,11 @@ class Renderer(GLOwner):
 
         size = self._check(size)
         check_float32_range(mesh, tf)
+        check_view_precision(mesh, camera, size)
         table = self.table(mesh, tf)
         self._use_table(table)
         self._clock.lap("table")
-        if shader == "tet" and order is None and choose(self.settings, mesh) == "raymarch":
+        if shader == "tet" and order is None and self._uses_raymarch(mesh, camera, size):
             return self._raymarch(mesh, camera, table, size)
         uniforms = self._view_uniforms(mesh, camera, size)
         cycle_breaks = n_culled = 0
@@ -463,25 +491,41 @@ class Renderer(GLOwner):
         fbo.clear(0.0, 0.0, 0.0, 0.0)
         self._table_tex.use(0)  # nothing in the loop binds another texture
         self._clock.lap("setup")
-        for n_classify, n in self._chunks(mesh, order_ids):
-            n_exact = self._classify(n_classify, uniforms, count_exact=True)
+        for n in self._chunks(mesh, order_ids):
+            n_exact = self._classify(n, {**uniforms, **table.gl_uniforms()},
+                                     perspective_correct=defines["PERSPECTIVE_CORRECT"], count_exact=True)
             self._draw(progs[n_exact > 0], fbo, n, ((moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA), moderngl.FUNC_ADD))
         image = self._read(fbo, size, 4, fb_dtype)
         self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, cycle_breaks=cycle_breaks, n_culled=n_culled,
                                      **self._clock.laps)
         return image
 
+    def _uses_raymarch(self, mesh: TetMesh, camera: Camera | None = None, size: tuple[int, int] | None = None) -> bool:
+        """Whether frames of this mesh go to the tet-marching ray caster: what
+        :func:`tetvr.method.choose` says, unless the records would not fit one texture of
+        this GL (then projected tetrahedra, which draw in chunks)."""
+        if choose(self.settings, mesh, camera, size) != "raymarch":
+            return False
+        fits = mesh.n_tets <= raymarch_capacity(int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384)))
+        if not fits and self.settings.method == "raymarch":
+            raise MemoryError(f"the mesh has {mesh.n_tets} tets, more than the ray caster holds in one texture on "
+                              f"this GL; use method=\"projected\" (or \"auto\") or split it into bricks")
+        return fits
+
+    def _march_uniforms(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> dict[str, Any]:
+        view = camera.view_matrix()
+        view[:3, 3] += view[:3, :3] @ mesh.bounds.mean(axis=0)  # the records are relative to the centre
+        near, far = camera.clipping_range
+        proj = camera.projection_matrix(size[0] / size[1])
+        return dict(u_view=view, u_proj=proj, u_near=near, u_far=far,
+                    u_ray_scale=(1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1])))
+
     def _raymarch(self, mesh: TetMesh, camera: Camera, table: PreintegrationTable, size: tuple[int, int]
                   ) -> NDArray[np.float32]:
         """One frame by tet marching (:mod:`tetvr.gl.raymarch`), with this renderer's table."""
         if self._marcher is None:
             self._marcher = Marcher(self)
-        view = camera.view_matrix()
-        view[:3, 3] += view[:3, :3] @ mesh.bounds.mean(axis=0)  # the records are relative to the centre
-        near, far = camera.clipping_range
-        proj = camera.projection_matrix(size[0] / size[1])
-        uniforms = dict(u_view=view, u_proj=proj, u_near=near, u_far=far,
-                        u_ray_scale=(1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1])))
+        uniforms = self._march_uniforms(mesh, camera, size)
         defines = dict(TABLE_NORMALIZED=int(table.encoding == "normalized"),
                        TABLE_CUBIC=int(self.settings.table_filter == "cubic"))
         self._table_tex.use(0)
@@ -501,7 +545,26 @@ class Renderer(GLOwner):
         clipping range; ``+inf`` / ``-inf`` where no tet covers the pixel. These are the ray
         limits for fusing the mesh with a ray-cast volume (:mod:`tetvr.fuse`).
         """
+        if self._uses_raymarch(mesh):
+            size = self._check(size)
+            if self._marcher is None:
+                self._marcher = Marcher(self)
+            ext = self._marcher.extent(mesh, camera, size, self._march_uniforms(mesh, camera, size), self._clock)
+            front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)
+            back = np.where(ext[..., 1] <= -3e38, -np.inf, ext[..., 1]).astype(np.float32)
+            return front, back
         return self._depth_extent(mesh, camera, size)
+
+    @gl_locked
+    def segment_counts(self, mesh: TetMesh, camera: Camera, *, size: tuple[int, int] = (512, 512)
+                       ) -> NDArray[np.int64]:
+        """Per pixel, how many ray--tet segments tet marching walks (no early termination):
+        the measure of the ray caster's work (``bench/stages.py``)."""
+        size = self._check(size)
+        if self._marcher is None:
+            self._marcher = Marcher(self)
+        ext = self._marcher.extent(mesh, camera, size, self._march_uniforms(mesh, camera, size), self._clock)
+        return ext[..., 2].astype(np.int64)
 
     def _depth_extent(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]
                       ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
@@ -516,8 +579,9 @@ class Renderer(GLOwner):
         fbo.use()
         fbo.clear(3e38, 3e38, 0.0, 0.0)
         # Any order will do: MIN blending is commutative.
-        for n_classify, n in self._chunks(mesh, np.arange(mesh.n_tets, dtype=np.uint32)):
-            self._classify(n_classify, uniforms)
+        for n in self._chunks(mesh, np.arange(mesh.n_tets, dtype=np.uint32)):
+            # The depth pass reads no table coordinates: the table's uniforms do not matter.
+            self._classify(n, uniforms, perspective_correct=int(self.settings.perspective_correct))
             self._draw(prog, fbo, n, ((moderngl.ONE, moderngl.ONE), moderngl.MIN))
         ext = self._read(fbo, size, 2)
         front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)

@@ -1,0 +1,105 @@
+"""The benchmark tables the docs quote, generated from the JSON in bench/results.
+
+Every table sits in a Markdown file between ``<!-- table:NAME -->`` and
+``<!-- /table:NAME -->``; this script rewrites those blocks from the JSON (``--write``) or
+checks that they agree (the default; ``tests/test_doc_tables.py`` runs the check), so the
+README, the docs and bench/README.md cannot quote numbers the JSON does not hold.
+
+    python bench/doc_tables.py [--write]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from pathlib import Path
+from typing import Any, Callable
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "bench" / "results"
+#: Files whose table blocks this script owns.
+DOCS = (ROOT / "README.md", ROOT / "bench" / "README.md", ROOT / "docs" / "methods.md")
+
+
+def _load(name: str) -> dict[str, Any]:
+    return json.loads((RESULTS / name).read_text())
+
+
+def methods_vs_vtk() -> str:
+    """Per view change at the benchmark's size: both tetvr methods against VTK's PT, and
+    their accuracy against the exact reference (bench/vs_vtk.py)."""
+    r = _load("vs_vtk.json")
+    rows = ["| mesh | tets | tet marching ms | projected tetrahedra ms | VTK PT ms | VTK / tet marching "
+            "| VTK / projected | PSNR tet marching | PSNR projected | PSNR VTK |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for m in sorted(r["meshes"], key=lambda m: m["n_tets"]):
+        v, s, p = m["view_change_median_s"], m["speedup_vs_vtk_pt"], m["psnr"]
+        if "tetvr_projected" not in v:
+            continue
+        rows.append(f"| {m['name']} | {m['n_tets']:,} | {v['tetvr'] * 1e3:.0f} | {v['tetvr_projected'] * 1e3:.0f} "
+                    f"| {v['vtk_pt'] * 1e3:.0f} | {s['tetvr']:.2f} | {s['tetvr_projected']:.2f} "
+                    f"| {p['tetvr']['exact']:.1f} | {p['tetvr_projected']['exact']:.1f} | {p['vtk_pt']['exact']:.1f} |")
+    size = "x".join(str(x) for x in r["size"])
+    return (f"{size}, median of {r['repeats']} view changes, frames in turn, {r.get('gl_renderer', '?')}, "
+            f"VTK {r.get('vtk_version', '?')}; PSNR (dB) of premultiplied RGB against the exact reference "
+            f"({r['date']}, `bench/results/vs_vtk.json`).\n\n" + "\n".join(rows))
+
+
+def raymarch_stages() -> str:
+    """The ray caster's stages and cost per segment beside projected tetrahedra's frame
+    (bench/stages.py)."""
+    r = _load("stages.json")
+    rows = ["| mesh | tets | entry ms | march ms | frame ms | segments per tet | ns per segment (march) "
+            "| layers | projected tetrahedra ms | projected / marching |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for m in r["meshes"]:
+        rm = m.get("raymarch")
+        if rm is None:
+            continue
+        md = rm["median"]
+        rows.append(f"| {m['name']} | {m['n_tets']:,} | {md['entry'] * 1e3:.1f} | {md['march'] * 1e3:.1f} "
+                    f"| {rm['wall_median'] * 1e3:.0f} | {rm['segments_per_tet']:.1f} "
+                    f"| {rm['ns_per_segment']['march_wall']:.0f} | {rm['layers']} "
+                    f"| {m['wall_median']['tet_unprofiled'] * 1e3:.0f} | {rm['speedup_vs_projected']:.2f} |")
+    size = "x".join(str(x) for x in r["size"])
+    return (f"{size}, `Camera.fit`, median of the repeats, wall time without per-stage waits "
+            f"({r['timestamp']}, `bench/results/stages.json`).\n\n" + "\n".join(rows))
+
+
+TABLES: dict[str, Callable[[], str]] = {"methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages}
+_BLOCK = re.compile(r"(<!-- table:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /table:(?P=name) -->)", re.S)
+
+
+def render(text: str) -> str:
+    """``text`` with every known table block regenerated."""
+    def sub(m: re.Match[str]) -> str:
+        make = TABLES.get(m.group("name"))
+        return m.group(0) if make is None else m.group(1) + make() + "\n" + m.group(4)
+
+    return _BLOCK.sub(sub, text)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--write", action="store_true", help="rewrite the blocks (default: check them)")
+    args = ap.parse_args(argv)
+    stale = []
+    for path in DOCS:
+        text = path.read_text()
+        new = render(text)
+        if new != text:
+            if args.write:
+                path.write_text(new)
+                print(f"rewrote the tables of {path.relative_to(ROOT)}")
+            else:
+                stale.append(str(path.relative_to(ROOT)))
+    if stale:
+        print("tables out of date with bench/results (run python bench/doc_tables.py --write): " + ", ".join(stale))
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
