@@ -24,6 +24,9 @@ GPU_EXTENT_RANGE = (1e-13, 1e18)
 # (at 1e-5 of the magnitude, one rounding step is ~1 % of the range).
 GPU_SCALAR_LIMIT = 1e37
 GPU_MIN_RELATIVE_RANGE = 1e-5
+#: The least span of scalars and transfer function the GPU resolves: float32's smallest
+#: normal number is 1.2e-38, and the table's scalar scale (bins / span) must stay finite.
+GPU_MIN_SPAN = 1e-30
 
 
 def _tf_range(lo: float, hi: float) -> tuple[float, float]:
@@ -177,6 +180,11 @@ def check_float32_range(mesh: TetMesh, tf: TransferFunction) -> None:
             f"(limit {GPU_SCALAR_LIMIT:g}); rescale the field and transfer function or use method='reference'"
         )
     lo, hi = min(mesh.scalar_range[0], tf.domain[0]), max(mesh.scalar_range[1], tf.domain[1])
+    if lo < hi and hi - lo < GPU_MIN_SPAN:
+        raise ValueError(
+            f"the scalars and transfer function span {lo!r} .. {hi!r} ({hi - lo:.3g}), below {GPU_MIN_SPAN:g}, "
+            "which the GPU's float32 cannot resolve (its numbers go subnormal near 1e-38); scale the field and "
+            "the transfer function (mesh.with_scalars) or use method='reference'")
     if lo < hi and hi - lo < GPU_MIN_RELATIVE_RANGE * max(abs(lo), abs(hi)):
         raise ValueError(
             f"the scalars and transfer function span {lo!r} .. {hi!r}, too narrow for their magnitude in the "

@@ -74,3 +74,23 @@ def test_small_cells_far_from_centre_within_the_limit_render_right(method):
     assert want[..., 3].max() > 0.2
     err = np.abs(got - want).max(axis=-1)
     assert err.max() < 1 / 255, err.max()
+
+
+def test_subnormal_field_is_refused_by_name():
+    """A field in [0, 1e-39] (subnormal in float32) rendered 9-13 dB wrong without an error."""
+    mesh = synthetic.cube(2)
+    sub = mesh.with_scalars((mesh.scalars - mesh.scalars.min()) / np.ptp(mesh.scalars) * 1e-39)
+    tf = TransferFunction.preset("viridis", sub.scalar_range, opacity=[(0, 0.2), (1, 0.9)], unit_distance=0.3)
+    with tetvr.Renderer() as r:
+        with pytest.raises(ValueError, match="float32 cannot resolve"):
+            r.render(sub, Camera.fit(mesh), tf, size=(16, 16))
+
+
+def test_control_points_closer_than_float_slopes_allow_are_refused():
+    """Control points 5e-324 apart gave infinite slopes in the table build: 16-25 dB."""
+    with pytest.raises(ValueError, match="5e-324 are 4.94e-324 apart"):
+        TransferFunction(color=((-1, 0, 0, 1), (0.0, 0, 0, 1), (5e-324, 1, 0, 0), (1, 1, 0, 0)),
+                         opacity=((-1, 0.2), (1, 0.9)), unit_distance=0.3)
+    # A steep but representable step is kept.
+    TransferFunction(color=((-1, 0, 0, 1), (0.0, 0, 0, 1), (1e-9, 1, 0, 0), (1, 1, 0, 0)),
+                     opacity=((-1, 0.2), (1, 0.9)), unit_distance=0.3)

@@ -30,7 +30,8 @@ from ..transfer import TransferFunction
 from ..volume import Volume
 from .context import context_alive, create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
-from .util import Clock, GLOwner, check_size, clear_gl_errors, gl_locked, locked, set_uniforms, table_texture
+from .util import (Clock, GLOwner, check_size, clear_gl_errors, gl_locked, locked, make_target, set_uniforms,
+                   table_texture)
 
 __all__ = ["Raycaster", "RaycastStats", "MODES"]
 
@@ -281,8 +282,8 @@ class Raycaster(GLOwner):
         for o in (self._fbo, self._fbo_tex):
             if o is not None:
                 o.release()
-        self._fbo_tex = self.ctx.texture(size, 4, dtype="f4")
-        self._fbo = self.ctx.framebuffer(color_attachments=[self._fbo_tex])
+        self._fbo_tex = self._fbo = None
+        self._fbo_tex, self._fbo = make_target(self.ctx, size, 4, "f4")  # nothing left behind if it fails
         self._fbo_size = size
 
     # ---- the frame ----

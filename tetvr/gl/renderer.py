@@ -32,7 +32,8 @@ from .context import create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
 from ..method import choose
 from .raymarch import Marcher, raymarch_capacity
-from .util import Clock, GLOwner, check_size, gl_locked, locked, set_uniforms, table_texture
+from .util import (Clock, GLOwner, check_size, clear_gl_errors, gl_locked, locked, make_target, set_uniforms,
+                   table_texture)
 
 __all__ = ["Renderer", "FrameStats"]
 
@@ -283,8 +284,8 @@ class Renderer(GLOwner):
                 old.release()
                 tex.release()
             self._targets.clear()
-        tex = self.ctx.texture(size, components, dtype=dtype)
-        fbo = self._targets[key] = self.ctx.framebuffer(color_attachments=[tex])
+        _, fbo = make_target(self.ctx, size, components, dtype)  # nothing left behind if it fails
+        self._targets[key] = fbo
         return fbo
 
     # ---- the frame ----
@@ -410,8 +411,6 @@ class Renderer(GLOwner):
         call, and the error flags a failed earlier frame may have left (a texture it could
         not make: ``GL_OUT_OF_MEMORY``) cleared, so this frame's own check after the
         readback reports only this frame's errors."""
-        from .util import clear_gl_errors
-
         self._check_alive()
         self._clock = Clock(self.ctx, self.profile)
         size = check_size(size, self.ctx)
