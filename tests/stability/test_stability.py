@@ -33,6 +33,12 @@ pytestmark = pytest.mark.gl
 
 SIZE = (96, 96)
 MIN_PSNR = {name: 40.0 for name in CASES} | {"interlocking_rings": 70.0}
+#: Max per-pixel error and pixels beyond 1/255 allowed, both methods (measured at 96x96;
+#: the defaults are 1/255 and none). The exceptions are the documented weak spots
+#: (docs/limits.md): a silhouette edge seen exactly end-on (pixel centres on it: 0.41 on 11
+#: pixels), opacity features a few table bins wide (spike 0.044 on 382 pixels, step 0.010
+#: on 28), and the tangled slivers under projected tetrahedra (0.033 on 662).
+MAX_ERROR = {"edge_on": (0.45, 16), "spike_tf": (0.05, 450), "step_tf": (0.015, 40), "slivers": (0.04, 800)}
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
@@ -58,6 +64,10 @@ def test_case_against_reference(renderer, name):
         return
     assert want[..., 3].max() > 0.3, f"{name}: the reference image is nearly empty; the case tests nothing"
     value = psnr(got, want)
-    if value < MIN_PSNR[name]:
+    err = np.abs(got.astype(np.float64) - want).max(axis=-1)
+    max_error, max_count = MAX_ERROR.get(name, (1 / 255, 0))
+    if value < MIN_PSNR[name] or err.max() > max_error or np.count_nonzero(err > 1 / 255) > max_count:
         where = save_failure(f"stability_{name}", got, want)
-        pytest.fail(f"{name} ({c.what}): PSNR {value:.1f} dB < {MIN_PSNR[name]} dB (images in {where})")
+        pytest.fail(f"{name} ({c.what}): PSNR {value:.1f} dB (bar {MIN_PSNR[name]}), max error {err.max():.3g} "
+                    f"(bar {max_error:.3g}), {np.count_nonzero(err > 1 / 255)} pixels beyond 1/255 (bar {max_count}) "
+                    f"(images in {where})")
