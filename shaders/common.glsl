@@ -22,7 +22,7 @@
                            // their ray with the tet exactly (v_exact_tet = the tet)
 
 // Tets with a vertex projecting beyond this NDC bound take the exact per-fragment path
-// (classify.comp); tetvr.gl.renderer.EXACT_NDC is the same bound for the CPU's check.
+// (classify.comp), which counts them so that the renderer compiles that path in only when needed.
 #define EXACT_NDC 8.0
 
 // One fan vertex (32 bytes, two uvec4; tetvr.gl.renderer._FAN_VERTEX_BYTES, _FAN_ATTRIBUTES):

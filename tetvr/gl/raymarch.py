@@ -44,6 +44,11 @@ MAX_LAYERS = 64
 OPAQUE_REMAINDER = 2.0**-20
 
 
+#: GL_NEAREST: records and targets are read with texelFetch, never filtered (the value of
+#: moderngl.NEAREST, written here so that importing this module imports no moderngl).
+_NEAREST = 0x2600
+
+
 def _layout(max_texture_size: int) -> tuple[int, int]:
     """Tets per row of the records texture and of the mates texture."""
     return max(1, min(max_texture_size // RECORD_TEXELS, 4096)), min(max_texture_size, 8192)
@@ -122,13 +127,13 @@ class Marcher:
                           f"overlap in space); tet marching follows faces and renders it wrong: use "
                           f"method=\"projected\" (\"auto\" does)", RuntimeWarning, stacklevel=4)
         max_tex = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
+        if mesh.n_tets > raymarch_capacity(max_tex):
+            raise MemoryError(f"the ray caster holds at most {raymarch_capacity(max_tex)} tets in one texture on this "
+                              f"GL (GL_MAX_TEXTURE_SIZE {max_tex}); the mesh has {mesh.n_tets}: use "
+                              f"method=\"projected\" or split it into bricks (tetvr.cull.submesh)")
         tets_per_row, mates_width = _layout(max_tex)
         rows = -(-mesh.n_tets // tets_per_row)
         mates_rows = -(-mesh.n_tets // mates_width)
-        if rows > max_tex or mates_rows > max_tex:
-            raise MemoryError(f"the ray caster holds at most {tets_per_row * max_tex} tets in one texture on this GL "
-                              f"(GL_MAX_TEXTURE_SIZE {max_tex}); the mesh has {mesh.n_tets}: use "
-                              f"method=\"projected\" or split it into bricks (tetvr.cull.submesh)")
         records = np.zeros((rows * tets_per_row, RECORD_TEXELS, 4), dtype=np.float32)
         records[:mesh.n_tets, :4] = rec.planes
         records[:mesh.n_tets, 4] = rec.scalar
@@ -137,7 +142,7 @@ class Marcher:
         mates[:mesh.n_tets] = rec.mates
         mates_tex = self.ctx.texture((mates_width, mates_rows), 4, mates.tobytes(), dtype="i4")
         for tex in (planes, mates_tex):
-            tex.filter = (self._nearest(), self._nearest())
+            tex.filter = (_NEAREST, _NEAREST)
         self._textures = [planes, mates_tex]
         pos = self.ctx.buffer(np.ascontiguousarray(rec.boundary_triangles, dtype=np.float32).tobytes())
         slots = self.ctx.buffer(np.repeat(rec.boundary_slots.astype(np.int32), 3).tobytes())
@@ -145,11 +150,6 @@ class Marcher:
         self._tets_per_row, self._mates_width = tets_per_row, mates_width
         self._mesh, self._records = mesh, rec
         return rec
-
-    def _nearest(self) -> int:
-        import moderngl
-
-        return moderngl.NEAREST
 
     # ---- per size ----
     def _target(self, size: tuple[int, int]) -> dict[str, Any]:
@@ -176,7 +176,7 @@ class Marcher:
                                                                   t[f"last_{side}"]])
         for name, tex in t.items():
             if "fbo" not in name:
-                tex.filter = (self._nearest(), self._nearest())
+                tex.filter = (_NEAREST, _NEAREST)
         self._targets[size] = t
         return t
 

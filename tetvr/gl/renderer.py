@@ -499,6 +499,13 @@ class Renderer(GLOwner):
                                      **self._clock.laps)
         return image
 
+    @property
+    def _march(self) -> Marcher:
+        """The tet-marching ray caster's GL state, made on first use."""
+        if self._marcher is None:
+            self._marcher = Marcher(self)
+        return self._marcher
+
     def _uses_raymarch(self, mesh: TetMesh, camera: Camera | None = None, size: tuple[int, int] | None = None) -> bool:
         """Whether frames of this mesh go to the tet-marching ray caster: what
         :func:`tetvr.method.choose` says, unless the records would not fit one texture of
@@ -522,13 +529,11 @@ class Renderer(GLOwner):
     def _raymarch(self, mesh: TetMesh, camera: Camera, table: PreintegrationTable, size: tuple[int, int]
                   ) -> NDArray[np.float32]:
         """One frame by tet marching (:mod:`tetvr.gl.raymarch`), with this renderer's table."""
-        if self._marcher is None:
-            self._marcher = Marcher(self)
         uniforms = self._march_uniforms(mesh, camera, size)
         defines = dict(TABLE_NORMALIZED=int(table.encoding == "normalized"),
                        TABLE_CUBIC=int(self.settings.table_filter == "cubic"))
         self._table_tex.use(0)
-        image = self._marcher.render(mesh, camera, size, uniforms, table.gl_uniforms(), defines, self._clock)
+        image = self._march.render(mesh, camera, size, uniforms, table.gl_uniforms(), defines, self._clock)
         err = self.ctx.error
         if err != "GL_NO_ERROR":
             raise RuntimeError(f"OpenGL error after rendering: {err}")
@@ -546,9 +551,7 @@ class Renderer(GLOwner):
         """
         if self._uses_raymarch(mesh):
             size = self._check(size)
-            if self._marcher is None:
-                self._marcher = Marcher(self)
-            ext = self._marcher.extent(mesh, camera, size, self._march_uniforms(mesh, camera, size), self._clock)
+            ext = self._march.extent(mesh, camera, size, self._march_uniforms(mesh, camera, size), self._clock)
             front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)
             back = np.where(ext[..., 1] <= -3e38, -np.inf, ext[..., 1]).astype(np.float32)
             return front, back
@@ -560,9 +563,7 @@ class Renderer(GLOwner):
         """Per pixel, how many ray--tet segments tet marching walks (no early termination):
         the measure of the ray caster's work (``bench/stages.py``)."""
         size = self._check(size)
-        if self._marcher is None:
-            self._marcher = Marcher(self)
-        ext = self._marcher.extent(mesh, camera, size, self._march_uniforms(mesh, camera, size), self._clock)
+        ext = self._march.extent(mesh, camera, size, self._march_uniforms(mesh, camera, size), self._clock)
         return ext[..., 2].astype(np.int64)
 
     def _depth_extent(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]
