@@ -37,10 +37,10 @@ from .util import (Clock, GLOwner, check_size, clear_gl_errors, gl_locked, locke
 
 __all__ = ["Renderer", "FrameStats"]
 
-#: Per-tet bytes a chunk may need in one storage-buffer binding: the chunk limit (the tets
-#: buffer needs 16; the fan vertices are bound in ranges). 48 was sizeof(TetFan), the fans of
-#: the path before classify.comp wrote finished vertices; kept so chunking is unchanged.
-_FAN_BYTES = 48
+#: Bytes per tet that size the largest chunk against one storage-buffer binding: the tets
+#: buffer needs 16 (the fan vertices are bound in ranges), with room for the per-tet data a
+#: shader may bind whole; on llvmpipe's 128 MiB binding this caps chunks at 2.8M tets.
+_CHUNK_BYTES_PER_TET = 48
 #: One fan vertex as classify.comp writes it (common.glsl's FanVertex): uvec4(ndc.xy, exact
 #: tet, 0), then the segment; 5 per tet. The attributes of tet.vert: (name, class, format, offset).
 _FAN_VERTEX_BYTES = 32
@@ -114,7 +114,7 @@ class Renderer(GLOwner):
         # One storage buffer must hold a chunk's fans (48 B/tet); meshes beyond it are drawn
         # in sorted chunks, each classified and drawn in turn.
         self._max_ssbo = int(self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE", 1 << 27))
-        limit = self._max_ssbo // _FAN_BYTES
+        limit = self._max_ssbo // _CHUNK_BYTES_PER_TET
         self.chunk_tets = min(chunk_tets or _DEFAULT_CHUNK, limit)
         self._chunked = False
         self.gl_info = describe(self.ctx)
