@@ -9,12 +9,13 @@
 // Out: f_color premultiplied RGBA so far; f_state = (t where the walk stopped, status:
 //      STATUS_REENTER if the ray left the mesh and may enter again, else STATUS_DONE);
 //      f_last the entry this pass started from (the next peel skips it).
-// Defines: FIRST (the first layer), EXTENT 1 (instead of colour, f_color = (eye depth of
+// Defines: CELL_DATA 1 (the records' scalars are cell constants: g = (0, c), and the scalar
+// is not carried across faces), FIRST (the first layer), EXTENT 1 (instead of colour, f_color = (eye depth of
 // the first entry, of the last exit, segments walked, 0): the ray limits for fusion with a
 // volume, and the segment count the benchmarks divide by; no table lookups).
 // The walk leaves each tet by the nearest of the three faces other than the one it came in
 // by whose plane the ray points out of; the scalar is carried from face to face (it is
-// continuous: point data is linear in each tet), so each step reads three planes, the
+// continuous: point data is linear in each tet; cell data is read per tet), so each step reads three planes, the
 // scalar record and the mates.
 
 #include "march_common.glsl"
@@ -113,8 +114,12 @@ void main() {
         tet = mate >> 2;
         face = mate & 3;
         t_in = t_out;
-        s_in = s_out;
         g = tet_scalar(tet);
+#if CELL_DATA
+        s_in = g.w;  // the field jumps at the face: each cell's own constant
+#else
+        s_in = s_out;
+#endif
     }
     f_color = acc;
     f_state = vec2(t_out, status);

@@ -168,8 +168,7 @@ def transparent_cells(mesh: TetMesh, tf: TransferFunction, *, scalar_margin: flo
                       ids: NDArray[np.integer[Any]] | None = None) -> NDArray[np.bool_]:
     """True for the tets (all, or those in ``ids``) whose scalar range, widened by
     ``scalar_margin``, maps entirely to zero opacity."""
-    tets = mesh.tets if ids is None else mesh.tets[ids]
-    s = mesh.scalars[tets]
+    s = mesh.corner_scalars if ids is None else mesh.corner_scalars[ids]
     lo = s.min(axis=1) - scalar_margin
     hi = s.max(axis=1) + scalar_margin
     return zero_opacity(tf, lo, hi)

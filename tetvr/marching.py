@@ -93,12 +93,16 @@ def march_records(mesh: TetMesh) -> MarchRecords:
     tets = np.asarray(mesh.tets, dtype=np.intp)
     p0 = rel[tets[:, 0]]
     edges = rel[tets[:, 1:]] - p0[:, None, :]  # (m, 3, 3), rows p_k - p_0
-    ds = mesh.scalars[tets[:, 1:]] - mesh.scalars[tets[:, :1]]  # (m, 3)
-    # Zero-volume tets are dropped on reading, so every edge matrix is invertible.
-    grad = np.linalg.solve(edges, ds[..., None])[..., 0]
     scalar = np.empty((mesh.n_tets, 4), dtype=np.float32)
-    scalar[:, :3] = grad
-    scalar[:, 3] = mesh.scalars[tets[:, 0]] - np.einsum("ij,ij->i", grad, p0)
+    if mesh.cell_scalars is None:
+        ds = mesh.scalars[tets[:, 1:]] - mesh.scalars[tets[:, :1]]  # (m, 3)
+        # Zero-volume tets are dropped on reading, so every edge matrix is invertible.
+        grad = np.linalg.solve(edges, ds[..., None])[..., 0]
+        scalar[:, :3] = grad
+        scalar[:, 3] = mesh.scalars[tets[:, 0]] - np.einsum("ij,ij->i", grad, p0)
+    else:  # cell data: constant in each tet
+        scalar[:, :3] = 0.0
+        scalar[:, 3] = mesh.cell_scalars
     slots = np.asarray(adj.boundary_slots, dtype=np.int64)
     corners = tets[slots // 4][np.arange(slots.shape[0])[:, None], FACE_VERTICES[slots % 4]]
     return MarchRecords(planes=planes, scalar=scalar, mates=np.ascontiguousarray(adj.mates, dtype=np.int32),

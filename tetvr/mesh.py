@@ -45,7 +45,7 @@ class MeshReport:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class TetMesh:
-    """A tetrahedral mesh with one scalar per point.
+    """A tetrahedral mesh with one scalar per point, or one per cell.
 
     Build it with :meth:`TetMesh.from_arrays` or :func:`read`; the constructor expects
     arrays that are already canonical.
@@ -54,9 +54,13 @@ class TetMesh:
     ----------
     points : (n, 3) float64, world coordinates.
     tets : (m, 4) int32, vertex ids, positively oriented, canonical order.
-    scalars : (n,) float64, the field that is rendered.
+    scalars : (n,) float64, the field at the points. For cell data, the cells' volume-weighted
+        average around each point (what histograms and default ranges read).
     scalar_name : name of the field.
     report : what was changed from the input.
+    cell_scalars : (m,) float64 or None. Cell data: the field is constant in each tet and
+        these values are what is rendered, exactly (``scalars`` is then only their
+        average at the points); None for point data (linear in each tet).
     """
 
     points: NDArray[np.float64]
@@ -64,6 +68,7 @@ class TetMesh:
     scalars: NDArray[np.float64]
     scalar_name: str = "scalars"
     report: MeshReport = MeshReport()
+    cell_scalars: NDArray[np.float64] | None = None
 
     @classmethod
     def from_arrays(
@@ -74,8 +79,14 @@ class TetMesh:
         *,
         scalar_name: str = "scalars",
         drop_degenerate: bool = True,
+        cell_scalars: ArrayLike | None = None,
     ) -> "TetMesh":
         """Validate, copy and canonicalise arrays into a mesh. The inputs are not modified.
+
+        ``scalars`` holds one value per point. With ``cell_scalars`` (one value per tet, in
+        the order of ``tets``) the mesh carries cell data, rendered constant in each tet;
+        ``scalars`` may then be None (the cells' volume-weighted average is used at the
+        points).
 
         Examples
         --------
@@ -114,6 +125,17 @@ class TetMesh:
             shown = f"{bad:g}" if t.dtype.kind == "f" and abs(bad) >= 2**53 else int(bad)
             raise ValueError(f"tets index point {shown}, outside 0..{pts.shape[0] - 1}")
         t = t.astype(np.int64)
+        c = None
+        if cell_scalars is not None:
+            c = _as_float_array(cell_scalars, "cell_scalars")
+            if c.ndim != 1 or c.shape[0] != t.shape[0]:
+                raise ValueError(f"cell_scalars must have one value per tet ({t.shape[0]}), got shape {c.shape}")
+            if not np.all(np.isfinite(c)):
+                raise ValueError(f"cell_scalars contain {int(np.sum(~np.isfinite(c)))} NaN or Inf values")
+            if scalars is None:
+                scalars = _cell_to_point(pts, t, c)
+        elif scalars is None:
+            raise ValueError("give scalars (one per point) or cell_scalars (one per tet)")
         s = _as_float_array(scalars, "scalars")
         if s.ndim != 1 or s.shape[0] != pts.shape[0]:
             raise ValueError(f"scalars must have one value per point ({pts.shape[0]}), got shape {s.shape}")
@@ -146,6 +168,9 @@ class TetMesh:
         t = t[keep]
         order = np.lexsort(t.T[::-1])
         t = t[order].astype(np.int32)
+        if c is not None:
+            c = c[keep][order]
+            c.setflags(write=False)
         # Count what was actually inverted in the input, not what sorting the ids flipped.
         raw = np.asarray(tets).astype(np.int64)[keep]
         inverted = int(np.sum(_signed_volume6(pts, raw) < 0))
@@ -153,7 +178,7 @@ class TetMesh:
                             inverted_fixed=inverted)
         for arr in (pts, t, s):
             arr.setflags(write=False)
-        return cls(points=pts, tets=t, scalars=s, scalar_name=scalar_name, report=report)
+        return cls(points=pts, tets=t, scalars=s, scalar_name=scalar_name, report=report, cell_scalars=c)
 
     # ---- derived geometry (computed once, used by every view) ----
     @property
@@ -180,14 +205,66 @@ class TetMesh:
         return np.stack([self.points.min(axis=0), self.points.max(axis=0)])
 
     @cached_property
+    def float32_origin(self) -> NDArray[np.float64]:
+        """(3,) the point the GPU takes coordinates relative to, so that float32 keeps them
+        precise far from the world's origin: the centre of the bounding box, unless
+        :meth:`with_float32_origin` gave another."""
+        origin = self.bounds.mean(axis=0)
+        origin.setflags(write=False)
+        return origin
+
+    def with_float32_origin(self, origin: ArrayLike) -> "TetMesh":
+        """This mesh with another :attr:`float32_origin` (same arrays, no copy).
+
+        Parts of one mesh rendered apart (:mod:`tetvr.distributed`'s bricks) take their
+        whole's origin: their points then round to the same float32 coordinates as in the
+        whole, and their images composite to the whole's image. Derived meshes
+        (:meth:`with_scalars`, ``dataclasses.replace``) go back to their own centre.
+
+        Examples
+        --------
+        >>> from tetvr import synthetic
+        >>> mesh = synthetic.cube(2)
+        >>> mesh.with_float32_origin((1.0, 0.0, 0.0)).float32_origin.tolist()
+        [1.0, 0.0, 0.0]
+        """
+        o = _as_float_array(origin, "origin")
+        if o.shape != (3,) or not np.all(np.isfinite(o)):
+            raise ValueError(f"origin must be 3 finite numbers, got {np.asarray(origin).tolist()!r}")
+        o.setflags(write=False)
+        out = dataclasses.replace(self)
+        out.__dict__.update(self.__dict__)  # what is cached does not depend on the origin
+        out.__dict__["float32_origin"] = o  # a cached_property: seeded in the instance
+        return out
+
+    @cached_property
     def scalar_range(self) -> tuple[float, float]:
-        return float(self.scalars.min()), float(self.scalars.max())
+        """Smallest and largest value rendered (of the cells, for cell data)."""
+        s = self.scalars if self.cell_scalars is None else self.cell_scalars
+        return float(s.min()), float(s.max())
+
+    @property
+    def cell_data(self) -> bool:
+        """Whether the field is cell data, rendered constant in each tet."""
+        return self.cell_scalars is not None
+
+    @cached_property
+    def corner_scalars(self) -> NDArray[np.float64]:
+        """(m, 4) the field at each tet's four vertices as that tet sees it: the point
+        values, or the cell's value four times for cell data. What every renderer reads."""
+        if self.cell_scalars is None:
+            out = self.scalars[self.tets]
+        else:
+            out = np.repeat(self.cell_scalars[:, None], 4, axis=1)
+        out.setflags(write=False)
+        return out
 
     # ---- what users of the field hold: meshio, pyvista, vtk ----
     @classmethod
-    def from_meshio(cls, mesh: Any, scalars: str | None = None, *, component: int | None = None) -> "TetMesh":
+    def from_meshio(cls, mesh: Any, scalars: str | None = None, *, component: int | None = None,
+                    cell_data: str = "exact") -> "TetMesh":
         """A mesh from a ``meshio.Mesh``, as :func:`read` makes one from a file (volume
-        cells split into tets, cell fields averaged onto the points).
+        cells split into tets; ``cell_data`` as in :func:`read`).
 
         Examples
         --------
@@ -200,10 +277,12 @@ class TetMesh:
         blocks = [(c.type, c.data) for c in mesh.cells]
         point_data = {k: np.asarray(v) for k, v in mesh.point_data.items()}
         cell_blocks = {k: [np.asarray(b) for b in v] for k, v in mesh.cell_data.items()}
-        return _from_blocks(mesh.points, blocks, point_data, cell_blocks, scalars, component, "the meshio.Mesh")
+        return _from_blocks(mesh.points, blocks, point_data, cell_blocks, scalars, component, "the meshio.Mesh",
+                            cell_data)
 
     @classmethod
-    def from_pyvista(cls, grid: Any, scalars: str | None = None, *, component: int | None = None) -> "TetMesh":
+    def from_pyvista(cls, grid: Any, scalars: str | None = None, *, component: int | None = None,
+                     cell_data: str = "exact") -> "TetMesh":
         """A mesh from a ``pyvista`` data set or any ``vtk`` data set (``vtkUnstructuredGrid``,
         ``vtkImageData``, ...); pyvista is not needed, vtk is (it is what the object is made of).
 
@@ -254,18 +333,22 @@ class TetMesh:
 
         point_data = arrays(grid.GetPointData())
         cell_blocks = {k: [v[ids] for ids in cell_order] for k, v in arrays(grid.GetCellData()).items()}
-        return _from_blocks(points, blocks, point_data, cell_blocks, scalars, component, "the vtk data set")
+        return _from_blocks(points, blocks, point_data, cell_blocks, scalars, component, "the vtk data set",
+                            cell_data)
 
     def to_pyvista(self) -> Any:
-        """The mesh as a ``pyvista.UnstructuredGrid`` of tets, with its field as point data
-        (needs pyvista: ``pip install pyvista``)."""
+        """The mesh as a ``pyvista.UnstructuredGrid`` of tets, with its field as point data,
+        or cell data for a cell field (needs pyvista: ``pip install pyvista``)."""
         try:
             import pyvista
         except ImportError:
             raise ImportError("TetMesh.to_pyvista needs pyvista: pip install pyvista") from None
         grid = pyvista.UnstructuredGrid({pyvista.CellType.TETRA: np.asarray(self.tets, dtype=np.int64)},
                                         np.asarray(self.points))
-        grid.point_data[self.scalar_name] = np.asarray(self.scalars)
+        if self.cell_scalars is None:
+            grid.point_data[self.scalar_name] = np.asarray(self.scalars)
+        else:
+            grid.cell_data[self.scalar_name] = np.asarray(self.cell_scalars)
         grid.set_active_scalars(self.scalar_name)
         return grid
 
@@ -277,7 +360,28 @@ class TetMesh:
         if not np.all(np.isfinite(s)):
             raise ValueError(f"scalars contain {int(np.sum(~np.isfinite(s)))} NaN or Inf values")
         s.setflags(write=False)
-        return dataclasses.replace(self, scalars=s, scalar_name=name)
+        return dataclasses.replace(self, scalars=s, scalar_name=name, cell_scalars=None)
+
+    def with_cell_scalars(self, cell_scalars: ArrayLike, name: str = "scalars") -> "TetMesh":
+        """The same geometry with a cell field (one value per tet, in this mesh's tet
+        order), rendered constant in each tet."""
+        c = _as_float_array(cell_scalars, "cell_scalars")
+        if c.shape != (self.n_tets,):
+            raise ValueError(f"cell_scalars must have one value per tet ({self.n_tets}), got shape {c.shape}")
+        if not np.all(np.isfinite(c)):
+            raise ValueError(f"cell_scalars contain {int(np.sum(~np.isfinite(c)))} NaN or Inf values")
+        s = _cell_to_point(self.points, self.tets.astype(np.int64), c)
+        c.setflags(write=False)
+        s.setflags(write=False)
+        return dataclasses.replace(self, scalars=s, scalar_name=name, cell_scalars=c)
+
+    def averaged(self) -> "TetMesh":
+        """Cell data made point data by volume-weighted averaging around each point (the
+        field ParaView's Cell Data to Point Data filter makes); point data unchanged."""
+        if self.cell_scalars is None:
+            return self
+        return dataclasses.replace(self, cell_scalars=None,
+                                   report=dataclasses.replace(self.report, scalar_source="cell, averaged to points"))
 
 
 def _as_float_array(value: ArrayLike, name: str) -> NDArray[np.float64]:
@@ -320,7 +424,8 @@ def _field_to_scalar(values: NDArray[Any], name: str, component: int | None) -> 
     return v
 
 
-def read(path: str | os.PathLike[str], scalars: str | None = None, *, component: int | None = None) -> TetMesh:
+def read(path: str | os.PathLike[str], scalars: str | None = None, *, component: int | None = None,
+         cell_data: str = "exact") -> TetMesh:
     """Read a tetrahedral mesh from any file meshio can read.
 
     Parameters
@@ -331,11 +436,14 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
     scalars : name of the point or cell field to render; by default the first point
         field, else the first cell field. Vector fields render by magnitude, or by
         ``component`` when given.
+    cell_data : ``"exact"`` (default): a cell field is rendered constant in each cell, as
+        the solver wrote it (a cell split into tets gives each its value);
+        ``"average"``: it becomes point data by volume-weighted averaging (each point takes
+        the mean of the tets around it, weighted by their volumes), linear in each tet.
 
     Notes
     -----
-    Cell data becomes point data by volume-weighted averaging: each point takes the mean
-    of the values of the tets around it, weighted by their volumes. Hexahedra, wedges,
+    Hexahedra, wedges,
     pyramids and quadratic cells are split into tetrahedra that conform across shared
     faces (:mod:`tetvr.cells`), with a warning listing them; surface, line and vertex
     cells are reported by type and count and left out. Zero-volume tets are dropped with
@@ -356,6 +464,7 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
         raise TypeError(f"component must be an integer or None, got {component!r}")
     from .cells import read_cells  # volume cells split into tets; legacy VTK meshio refuses is read there
 
+    exact_cells = _check_cell_data(cell_data)
     m = read_cells(path, meshio_read=_read_any)
     tets = m.tets
     if m.split.split or m.split.ignored:
@@ -381,7 +490,8 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
         raise KeyError(
             f"no field named {scalars!r} in {path!r}; point fields: {point_names}, cell fields: {cell_names}"
         )
-    mesh = TetMesh.from_arrays(m.points, tets, values, scalar_name=scalars)
+    mesh = TetMesh.from_arrays(m.points, tets, values, scalar_name=scalars,
+                               cell_scalars=cell_values if source == "cell" and exact_cells else None)
     report = dataclasses.replace(mesh.report, ignored_cells=m.split.ignored, scalar_source=source,
                                  split_cells=m.split.split, steiner_points=m.split.steiner_points,
                                  fields=tuple(point_names) + tuple(n for n in cell_names if n not in m.point_data))
@@ -618,10 +728,11 @@ _VTK_CELL_TYPES = {1: "vertex", 3: "line", 5: "triangle", 7: "polygon", 9: "quad
 
 def _from_blocks(points: ArrayLike, blocks: list[tuple[str, Any]], point_data: dict[str, NDArray[Any]],
                  cell_blocks: dict[str, list[NDArray[Any]]], scalars: str | None, component: int | None,
-                 where: str) -> TetMesh:
+                 where: str, cell_data: str = "exact") -> TetMesh:
     """A mesh from cell blocks and fields held in memory, as :func:`read` makes one from a file."""
     from .cells import split_cells
 
+    exact_cells = _check_cell_data(cell_data)
     if scalars is not None and not isinstance(scalars, str):
         raise TypeError(f"scalars must be a field name (str) or None, got {scalars!r}")
     pts = np.asarray(points, dtype=np.float64)
@@ -657,7 +768,8 @@ def _from_blocks(points: ArrayLike, blocks: list[tuple[str, Any]], point_data: d
                              f"{sum(len(d) for _, d in blocks)} cells")
         col = flat[split.parent]
         cell_values = _field_to_scalar(col[:, 0] if col.shape[1] == 1 else col, scalars, component)
-        values = _cell_to_point(split.points, split.tets.astype(np.int64), cell_values.astype(np.float64))
+        cell_values = cell_values.astype(np.float64)
+        values = _cell_to_point(split.points, split.tets.astype(np.int64), cell_values)
         source = "cell"
     else:
         raise KeyError(f"no field named {scalars!r} in {where}; point fields: {list(point_data)}, "
@@ -665,10 +777,22 @@ def _from_blocks(points: ArrayLike, blocks: list[tuple[str, Any]], point_data: d
     if not np.all(used):
         values = values[used]
         split = split.compacted(used)
-    mesh = TetMesh.from_arrays(split.points, split.tets, values, scalar_name=scalars)
+    mesh = TetMesh.from_arrays(split.points, split.tets, values, scalar_name=scalars,
+                               cell_scalars=cell_values if source == "cell" and exact_cells else None)
     report = dataclasses.replace(mesh.report, ignored_cells=split.ignored, scalar_source=source,
                                  split_cells=split.split, steiner_points=split.steiner_points, fields=tuple(names))
     return dataclasses.replace(mesh, report=report)
+
+
+#: How a cell field is rendered (``read(..., cell_data=...)``).
+CELL_DATA = ("exact", "average")
+
+
+def _check_cell_data(cell_data: str) -> bool:
+    """Whether cell fields stay cell data; refuses an unknown mode."""
+    if cell_data not in CELL_DATA:
+        raise ValueError(f"cell_data must be one of {CELL_DATA}, got {cell_data!r}")
+    return cell_data == "exact"
 
 
 def _cell_to_point(points: NDArray[np.float64], tets: NDArray[np.int64], values: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 from .camera import Camera, check_clipping_range
 from .mesh import TetMesh
 from .settings import RenderSettings
-from .transfer import DEFAULT_OPACITY_RAMP, TransferFunction, default_unit_distance, point_weights, robust_range
+from .transfer import DEFAULT_OPACITY_RAMP, TransferFunction, default_unit_distance, field_range
 
 __all__ = ["render", "default_transfer_function"]
 
@@ -71,7 +71,7 @@ def default_transfer_function(
     from .colormaps import colormap
 
     # robust_range widens a constant field's range as _tf_range does; a given range is the caller's.
-    rng = robust_range(mesh.scalars, point_weights(mesh.points, mesh.tets)) if scalar_range is None else scalar_range
+    rng = field_range(mesh) if scalar_range is None else scalar_range
     u = default_unit_distance(mesh.bounds) if unit_distance is None else unit_distance
     op = DEFAULT_OPACITY_RAMP if opacity is None else opacity
     if opacity is None and scalar_range is None and mesh.scalar_range[0] == mesh.scalar_range[1]:

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["TransferFunction", "PRESETS", "DEFAULT_OPACITY_RAMP", "DEFAULT_PERCENTILES", "DEFAULT_UNIT_FRACTION",
-           "robust_range", "default_unit_distance", "point_weights"]
+           "robust_range", "field_range", "default_unit_distance", "point_weights"]
 
 # ---- the default rule: one place, used by preset(mesh), render(), the scene JSON and the CLI ----
 #: Percentiles (of the field, weighted by the volume each point stands for) that span the
@@ -50,6 +50,18 @@ def point_weights(points: ArrayLike, tets: ArrayLike) -> NDArray[np.float64]:
     q = p[t]
     vol = np.abs(np.einsum("ij,ij->i", np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]), q[:, 3] - q[:, 0])) / 6.0
     return np.bincount(t.ravel(), weights=np.repeat(vol / 4.0, 4), minlength=p.shape[0]).astype(np.float64)
+
+
+def field_range(mesh: Any) -> tuple[float, float]:
+    """The default scalar range of a mesh's field: :func:`robust_range` of the values that
+    are rendered, each weighted by the volume it stands for (the points' lumped volumes;
+    the cells' volumes for cell data)."""
+    cells = getattr(mesh, "cell_scalars", None)
+    if cells is None:
+        return robust_range(mesh.scalars, point_weights(mesh.points, mesh.tets))
+    q = np.asarray(mesh.points)[np.asarray(mesh.tets, dtype=np.int64)]
+    vol = np.abs(np.einsum("ij,ij->i", np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]), q[:, 3] - q[:, 0]))
+    return robust_range(cells, vol)
 
 
 def robust_range(values: ArrayLike, weights: ArrayLike | None = None,
@@ -223,7 +235,7 @@ class TransferFunction:
             mesh, scalar_range = scalar_range, None
         if mesh is not None:
             if scalar_range is None:
-                scalar_range = robust_range(mesh.scalars, point_weights(mesh.points, mesh.tets))
+                scalar_range = field_range(mesh)
             if unit_distance is None:
                 unit_distance = default_unit_distance(mesh.bounds)
             if opacity is None:

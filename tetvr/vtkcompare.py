@@ -150,7 +150,8 @@ def vtk_status() -> tuple[bool, str]:
 
 
 def _vtk_grid(mods: Any, mesh: TetMesh) -> Any:
-    """The mesh as a vtkUnstructuredGrid of tetrahedra with point scalars."""
+    """The mesh as a vtkUnstructuredGrid of tetrahedra with its field: point scalars, or
+    cell scalars for cell data (VTK's mappers then hold each cell's value constant)."""
     ns = mods.np_support
     points = mods.core.vtkPoints()
     points.SetData(ns.numpy_to_vtk(np.ascontiguousarray(mesh.points, dtype=np.float64), deep=True))
@@ -162,9 +163,11 @@ def _vtk_grid(mods: Any, mesh: TetMesh) -> Any:
     grid = mods.data.vtkUnstructuredGrid()
     grid.SetPoints(points)
     grid.SetCells(mods.data.VTK_TETRA, cells)
-    scalars = ns.numpy_to_vtk(np.ascontiguousarray(mesh.scalars, dtype=np.float64), deep=True)
+    cells_data = getattr(mesh, "cell_scalars", None)
+    values = mesh.scalars if cells_data is None else cells_data
+    scalars = ns.numpy_to_vtk(np.ascontiguousarray(values, dtype=np.float64), deep=True)
     scalars.SetName(mesh.scalar_name or "scalars")
-    grid.GetPointData().SetScalars(scalars)
+    (grid.GetPointData() if cells_data is None else grid.GetCellData()).SetScalars(scalars)
     return grid
 
 
@@ -355,7 +358,8 @@ class VTKProcess:
         self._out = Connection(down_w, readable=False)
         self._in = Connection(up_r, writable=False)
         grid = {"points": np.asarray(mesh.points), "tets": np.asarray(mesh.tets),
-                "scalars": np.asarray(mesh.scalars), "scalar_name": mesh.scalar_name}
+                "scalars": np.asarray(mesh.scalars), "scalar_name": mesh.scalar_name,
+                "cell_scalars": None if mesh.cell_scalars is None else np.asarray(mesh.cell_scalars)}
         self._out.send((grid, tf.to_dict(), mapper, tuple(int(v) for v in size)))
         self.info = self._reply()
 

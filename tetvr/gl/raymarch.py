@@ -236,7 +236,7 @@ class Marcher:
         ctx.disable(moderngl.DEPTH_TEST)
         clock.lap("entry")
 
-        march_defines = dict(defines, PERSPECTIVE=perspective)
+        march_defines = dict(defines, PERSPECTIVE=perspective, CELL_DATA=int(mesh.cell_data))
         samplers = dict(u_entry_depth=3, u_entry=4, u_color_in=5, u_state_in=6, u_last_in=7, u_state=5, u_last=7)
         steps = dict(u_max_steps=int(min(mesh.n_tets + 1, 1 << 30)), u_opaque=1.0 - OPAQUE_REMAINDER)
         src, dst = "b", "a"

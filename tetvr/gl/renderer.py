@@ -122,6 +122,7 @@ class Renderer(GLOwner):
         self._mesh: TetMesh | None = None
         self._mesh_buffers: list[Any] = []
         self._centre = np.zeros(3)
+        self._gpu_tets: NDArray[np.int32] | None = None  # the tets buffer's cells (cell data: unshared points)
         self._fans: Any = None
         self._order: Any = None
         self._marcher: Marcher | None = None  # the tet-marching ray caster's GL state, made on first use
@@ -143,7 +144,7 @@ class Renderer(GLOwner):
         self._mesh_buffers = []
         self._targets.clear()
         self._fans = self._order = self._table_tex = self._fan_indices = self._exact_count = None
-        self._mesh = None
+        self._mesh = self._gpu_tets = None
         self._table = self._table_cache = None
         if self._marcher is not None:
             self._marcher.forget()
@@ -214,20 +215,30 @@ class Renderer(GLOwner):
             if b is not None:
                 b.release()
         # Coordinates relative to the mesh centre keep float32 precise far from the origin.
-        self._centre = mesh.bounds.mean(axis=0)
-        pts = np.empty((mesh.n_points, 4), dtype=np.float32)
-        pts[:, :3] = mesh.points - self._centre
-        pts[:, 3] = mesh.scalars
+        self._centre = mesh.float32_origin
+        if mesh.cell_scalars is None:
+            pts = np.empty((mesh.n_points, 4), dtype=np.float32)
+            pts[:, :3] = mesh.points - self._centre
+            pts[:, 3] = mesh.scalars
+            self._gpu_tets = mesh.tets
+        else:
+            # Cell data: every tet gets its own four points carrying its value, so the
+            # shaders, which read a scalar per vertex, see the field constant in each tet.
+            pts = np.empty((mesh.n_tets, 4, 4), dtype=np.float32)
+            pts[..., :3] = mesh.points[mesh.tets] - self._centre
+            pts[..., 3] = mesh.cell_scalars[:, None]
+            pts = pts.reshape(-1, 4)
+            self._gpu_tets = np.arange(4 * mesh.n_tets, dtype=np.int32).reshape(-1, 4)
         if pts.nbytes > self._max_ssbo:
-            raise MemoryError(f"the mesh has {mesh.n_points} points ({pts.nbytes >> 20} MiB); this GL allows "
-                              f"{self._max_ssbo >> 20} MiB in one storage buffer")
+            raise MemoryError(f"the mesh needs {pts.shape[0]} points on the GPU ({pts.nbytes >> 20} MiB); this GL "
+                              f"allows {self._max_ssbo >> 20} MiB in one storage buffer")
         chunk = min(mesh.n_tets, self.chunk_tets)
         self._chunked = chunk < mesh.n_tets
         points = self.ctx.buffer(pts.tobytes())
         if self._chunked:
             tets = self.ctx.buffer(reserve=chunk * 16)
         else:
-            tets = self.ctx.buffer(np.ascontiguousarray(mesh.tets, dtype=np.int32).tobytes())
+            tets = self.ctx.buffer(np.ascontiguousarray(self._gpu_tets, dtype=np.int32).tobytes())
         self._mesh_buffers = [points, tets]
         # Written by classify.comp, read as vertex attributes: 5 finished vertices per tet.
         self._fans = self.ctx.buffer(reserve=max(chunk, 1) * 5 * _FAN_VERTEX_BYTES)
@@ -257,7 +268,7 @@ class Renderer(GLOwner):
                 # (tet.frag's exact segments read the tets buffer): without this wait the
                 # previous chunk's near-plane fragments read this chunk's cells.
                 self.ctx.finish()
-            self._mesh_buffers[1].write(np.ascontiguousarray(mesh.tets[ids], dtype=np.int32).tobytes())
+            self._mesh_buffers[1].write(np.ascontiguousarray(self._gpu_tets[ids], dtype=np.int32).tobytes())
             self._clock.lap("order_upload")
             yield int(ids.shape[0])
 
@@ -520,7 +531,7 @@ class Renderer(GLOwner):
 
     def _march_uniforms(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> dict[str, Any]:
         view = camera.view_matrix()
-        view[:3, 3] += view[:3, :3] @ mesh.bounds.mean(axis=0)  # the records are relative to the centre
+        view[:3, 3] += view[:3, :3] @ mesh.float32_origin  # the records are relative to it
         near, far = camera.clipping_range
         proj = camera.projection_matrix(size[0] / size[1])
         return dict(u_view=view, u_proj=proj, u_near=near, u_far=far,
