@@ -357,96 +357,259 @@ def test_model_refined_frame_is_the_plain_render():
         model.close()
 
 
-# ---------------------------------------------------------------- the widget
-def test_viewer_widget(tmp_path):
-    pytest.importorskip("ipywidgets")
+# ---------------------------------------------------------------- the render loop
+class SlowRenderer(RecordingRenderer):
+    """A recording renderer that takes ``seconds`` a frame (and can be told to fail)."""
+
+    def __init__(self, seconds=0.05):
+        super().__init__()
+        self.seconds, self.fail = seconds, None
+
+    def render(self, mesh, camera, tf, *, size, order=None):
+        import time
+
+        time.sleep(self.seconds)
+        if self.fail:
+            raise RuntimeError(self.fail)
+        return super().render(mesh, camera, tf, size=size, order=order)
+
+
+def test_preview_sizer_follows_the_measured_cost():
+    from tetvr.widget_loop import PreviewSizer
+
+    s = PreviewSizer(budget_s=0.1, min_scale=0.1, max_growth=1.25)
+    s.observe(1.6, scale=1.0)  # a full frame of 1.6 s: a quarter of the side, 1/16 of the pixels
+    assert s.scale == pytest.approx(0.25) and s.size((400, 300)) == (100, 75)
+    s.observe(0.01, scale=0.25)  # a cheap preview: grows, but by 25 % at most
+    assert s.scale == pytest.approx(0.3125)
+    s.observe(100.0, scale=0.3125)
+    assert s.scale == 0.1  # never below min_scale
+    with pytest.raises(ValueError, match="budget_s"):
+        PreviewSizer(budget_s=0.0)
+
+
+def test_render_loop_draws_the_latest_state_and_drops_stale_ones(tmp_path):
+    from tetvr.widget_loop import RenderLoop
+
+    rec = SlowRenderer(0.05)
+    model = ViewerModel(_scene(tmp_path, size=(80, 60)), renderer=rec)
+    frames = []
+    loop = RenderLoop(model, frames.append, settle_s=0.15, budget_s=0.01)
+    try:
+        loop.update(final=True)
+        assert loop.wait_idle(10)
+        assert frames[-1].final and frames[-1].size == (80, 60)
+        n0, start = len(rec.calls), model.camera
+        for _ in range(40):  # 40 inputs in ~0.2 s against 50 ms frames
+            loop.update(lambda m: m.control.azimuth(1.0))
+        assert loop.wait_idle(10)
+        drawn = rec.calls[n0:]
+        assert 2 <= len(drawn) < 10  # merged into few frames, not 40 queued ones
+        assert [f.final for f in frames[-len(drawn):]] == [False] * (len(drawn) - 1) + [True]
+        assert all(c["size"][0] < 80 for c in drawn[:-1]) and drawn[-1]["size"] == (80, 60)
+        # The full frame shows the latest state: all 40 degrees.
+        assert drawn[-1]["camera"] == model.camera != start
+        assert frames[-1].revision == loop.revision and frames[-1].wanted_at > 0
+    finally:
+        loop.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        loop.update()
+
+
+def test_render_loop_reports_errors_and_recovers(tmp_path):
+    from tetvr.widget_loop import RenderLoop
+
+    rec = SlowRenderer(0.0)
+    frames = []
+    loop = RenderLoop(ViewerModel(_scene(tmp_path), renderer=rec), frames.append, settle_s=0.0)
+    try:
+        rec.fail = "cannot create texture"
+        loop.update(final=True)
+        assert loop.wait_idle(10)
+        assert frames[-1].error == "RuntimeError: cannot create texture" and frames[-1].image is None
+        assert "cannot create texture" in loop.last_error
+        rec.fail = None
+        loop.update(lambda m: m.control.azimuth(5.0), final=True)
+        assert loop.wait_idle(10) and frames[-1].error is None and frames[-1].final
+    finally:
+        loop.close()
+
+
+# ---------------------------------------------------------------- the Jupyter viewer (no browser)
+def _viewer(tmp_path, renderer=None, **kw):
+    pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
     from tetvr.widget import Viewer
 
-    rec, clock = RecordingRenderer(), Clock()
-    v = Viewer(_scene(tmp_path), renderer=rec, clock=clock, settle_s=0.2)
-    assert v.image.value[:8] == b"\x89PNG\r\n\x1a\n" and v.hist.value[:8] == b"\x89PNG\r\n\x1a\n"
-    assert v.status.value.startswith("refined 80x60")
-    # Mouse drag (as ipyevents reports it) -> previews; the wheel zooms.
-    v.handle_mouse({"type": "mousedown", "relativeX": 10, "relativeY": 10})
-    v.handle_mouse({"type": "mousemove", "relativeX": 30, "relativeY": 12, "buttons": 1})
-    assert v.status.value.startswith("preview 40x30") and rec.calls[-1]["size"] == (40, 30)
-    d0 = np.linalg.norm(np.subtract(v.model.camera.position, v.model.camera.focal_point))
-    v.handle_mouse({"type": "wheel", "deltaY": -3})
-    assert np.linalg.norm(np.subtract(v.model.camera.position, v.model.camera.focal_point)) < d0
-    v.handle_mouse({"type": "mouseup"})
-    v.refine()
-    assert v.status.value.startswith("refined") and rec.calls[-1]["size"] == (80, 60)
-    # Transfer-function controls.
-    n = len(v.model.editor.points)
-    v._add_point()
-    assert len(v.model.editor.points) == n + 1 and v.point.value == v._selected
-    v.point_a.value = 0.33
-    assert v.model.editor.points[v._selected][1] == pytest.approx(0.33)
-    v.colormap.value = "hot"
-    assert v.model.editor.colormap == "hot"
-    v.field.value = "pressure"
-    assert v.model.mesh.scalar_name == "pressure" and v.lo.value == pytest.approx(v.model.mesh.scalar_range[0])
-    v.hi.value = v.lo.value - 1.0  # an impossible range is reported, not raised
-    assert v.status.value.startswith("error")
-    # Save and load through the widget.
-    v.path.value = str(tmp_path / "saved.json")
-    v._save()
-    assert v.status.value.startswith("saved") and (tmp_path / "saved.json").is_file()
-    v.field.value = "temperature"
-    v.path.value = str(tmp_path / "saved.json")
-    v._load()
-    assert v.model.field == "pressure" and v.field.value == "pressure" and v.colormap.value == "(scene)"
-    v.close()
+    return Viewer(_scene(tmp_path), renderer=renderer or RecordingRenderer(), **kw)
 
 
-def test_viewer_redraws_the_histogram_only_when_it_changes(tmp_path, monkeypatch):
-    pytest.importorskip("ipywidgets")
+def _drag(target, points, button=1, modifiers=()):
+    (x0, y0), rest = points[0], points[1:]
+    target({"type": "pointer_down", "x": x0, "y": y0, "button": button, "buttons": (button,), "modifiers": modifiers})
+    for x, y in rest:
+        target({"type": "pointer_move", "x": x, "y": y, "button": button, "buttons": (button,),
+                "modifiers": modifiers})
+    target({"type": "pointer_up", "x": rest[-1][0], "y": rest[-1][1], "button": button, "buttons": (),
+            "modifiers": modifiers})
+
+
+def test_viewer_mouse_orbits_pans_zooms_and_ends_on_the_full_frame(tmp_path):
+    v = _viewer(tmp_path, SlowRenderer(0.01), settle_s=0.1)
+    try:
+        assert v.loop.wait_idle(10)
+        first = v._image_frame()
+        assert first.shape == (60, 80, 3) and first.dtype == np.uint8 and "full 80×60" in v.status.value
+        home = v.model.camera
+        _drag(v._image_event, [(10, 10), (20, 12), (30, 15)])
+        assert v.model.camera.position != home.position and v.model.camera.focal_point == home.focal_point
+        orbited = v.model.camera
+        _drag(v._image_event, [(10, 10), (30, 10)], modifiers=("Shift",))  # pans: the focal point moves
+        assert v.model.camera.focal_point != orbited.focal_point
+        d0 = _dist(v.model.camera)
+        v._image_event({"type": "wheel", "dx": 0, "dy": -100, "x": 5, "y": 5})
+        assert _dist(v.model.camera) == pytest.approx(d0 / 1.1)
+        assert v.loop.wait_idle(10)
+        assert v._image_frame().shape == (60, 80, 3) and "full" in v.status.value
+        assert v.model.renderer.calls[-1]["camera"] == v.model.camera
+    finally:
+        v.close()
+
+
+def test_viewer_shows_render_errors(tmp_path):
+    rec = SlowRenderer(0.0)
+    rec.fail = "image of NaN"
+    v = _viewer(tmp_path, rec)
+    try:
+        assert v.loop.wait_idle(10)
+        assert "error" in v.status.value and "image of NaN" in v.status.value
+        v.lo.value = v.hi.value + 1.0  # an impossible range is shown too, not raised
+        assert "scalar range" in v.status.value
+    finally:
+        v.close()
+
+
+def test_histogram_edits_click_drag_double_click_and_rebuild_little(tmp_path, monkeypatch):
+    import tetvr.sort
+    import tetvr.widget as widget
+
+    from tetvr.widget_jupyter import HIST_SIZE
+
+    v = _viewer(tmp_path)
+    sorts, passes = [], []
+    real_sort, real_hist = tetvr.sort.visibility_order, widget.log_histogram
+    try:
+        v.model.settings = dataclasses.replace(v.model.settings, method="projected")
+        v.loop.update(final=True)
+        assert v.loop.wait_idle(10)
+        v._hist_frame()
+        monkeypatch.setattr(tetvr.sort, "visibility_order", lambda *a: sorts.append(1) or real_sort(*a))
+        monkeypatch.setattr(widget, "log_histogram", lambda *a: passes.append(1) or real_hist(*a))
+        renderer, n = v.model.renderer, len(v.model.editor.points)
+        w_px, h_px = HIST_SIZE
+        # Click on empty space: a point there; drag it; the picture follows.
+        before = v._hist_frame()
+        _drag(v._hist_event, [(w_px * 0.4, h_px * 0.5), (w_px * 0.45, h_px * 0.2)])
+        assert len(v.model.editor.points) == n + 1
+        t, a = v.model.editor.points[v.picker.selected]
+        assert t == pytest.approx(0.45 * w_px / (w_px - 1), abs=0.01) and a == pytest.approx(0.81, abs=0.02)
+        assert not np.array_equal(v._hist_frame(), before)
+        assert v.loop.wait_idle(10)
+        assert renderer.calls[-1]["tf"] == v.model.editor.transfer_function() and renderer.calls[-1]["size"] == (80, 60)
+        # Double-click on it: gone. The end points stay.
+        x, y = t * (w_px - 1), (1 - a) * (h_px - 3) + 1
+        v._hist_event({"type": "double_click", "x": x, "y": y})
+        assert len(v.model.editor.points) == n
+        v._hist_event({"type": "double_click", "x": 0, "y": (1 - v.model.editor.points[0][1]) * (h_px - 3) + 1})
+        assert len(v.model.editor.points) == n
+        assert v.loop.wait_idle(10)
+        # Opacity edits: no sort, no pass over the field's values, the same renderer.
+        assert sorts == [] and passes == [] and v.model.renderer is renderer
+    finally:
+        v.close()
+
+
+def test_viewer_resizes_with_the_page_keeping_the_aspect(tmp_path):
+    v = _viewer(tmp_path)
+    try:
+        v._image_event({"type": "resize", "width": 40.0, "height": 60.0, "ratio": 2.0})
+        assert v.canvas.css_height == "32px"  # 40 px wide at 4:3 (+ the 1 px border each side)
+        assert v.loop.wait_idle(10) and v.model.size == (80, 60)
+        v._image_event({"type": "resize", "width": 200.0, "height": 150.0, "ratio": 1.0})
+        assert v.loop.wait_idle(10) and v.model.size == (200, 150) and v._image_frame().shape == (150, 200, 3)
+    finally:
+        v.close()
+
+
+def test_viewer_takes_a_mesh_file_a_mesh_or_a_scene(tmp_path):
+    pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
+    from tetvr.widget import DEFAULT_SIZE, Viewer, scene_of
+
+    scene = _scene(tmp_path)
+    v = Viewer(tmp_path / "two.vtu", renderer=RecordingRenderer())  # a mesh file is not read as JSON
+    try:
+        assert v.model.size == DEFAULT_SIZE and v.model.fields == ["temperature", "pressure", "material"]
+    finally:
+        v.close()
+    mesh_scene = scene_of(scene.mesh, size=(30, 20))
+    assert mesh_scene.size == (30, 20) and mesh_scene.mesh is scene.mesh
+    with pytest.raises(ValueError, match="in memory"):
+        ViewerModel(mesh_scene, renderer=RecordingRenderer()).save(tmp_path / "x.json")
+    with pytest.raises(FileNotFoundError, match="no such scene or mesh file"):
+        scene_of(tmp_path / "missing.vtu")
+    with pytest.raises(TypeError, match="Scene, a TetMesh or the path"):
+        scene_of(42)
+    with pytest.raises(ValueError, match="size"):
+        scene_of(scene, size=(0, 10))
+
+
+def test_viewer_save_load_and_pickers(tmp_path):
+    v = _viewer(tmp_path)
+    try:
+        v.colormap.value = "hot"
+        assert v.model.editor.colormap == "hot"
+        v.field.value = "pressure"
+        assert v.model.mesh.scalar_name == "pressure" and v.lo.value == pytest.approx(v.model.editor.scalar_range[0])
+        v.path.value = str(tmp_path / "saved.json")
+        v._save()
+        assert "saved" in v.status.value and (tmp_path / "saved.json").is_file()
+        v.field.value = "temperature"
+        v._load()
+        assert v.model.field == "pressure" and v.field.value == "pressure" and v.colormap.value == "(scene)"
+        assert v.picker.editor is v.model.editor
+        home = v.model.control.home
+        v.model.control.azimuth(30.0)
+
+        def buttons(widget):
+            import ipywidgets as w
+
+            if isinstance(widget, w.Button):
+                yield widget
+            for child in getattr(widget, "children", ()):
+                yield from buttons(child)
+
+        next(b for b in buttons(v.widget) if b.description == "⟲").click()
+        assert v.model.camera == home
+        v.path.value = str(tmp_path / "nope.json")
+        v._guard(v._load)
+        assert "error" in v.status.value
+    finally:
+        v.close()
+
+
+@pytest.mark.gl
+def test_closing_the_widget_stops_the_loop_and_frees_gl(tmp_path):
+    pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
     from tetvr.widget import Viewer
 
-    v = Viewer(_scene(tmp_path), renderer=RecordingRenderer(), clock=Clock())
-    drawn = []
-    real = TransferFunctionEditor.image
-    monkeypatch.setattr(TransferFunctionEditor, "image", lambda ed, *a, **k: drawn.append(1) or real(ed, *a, **k))
-    v.handle_mouse({"type": "mousedown", "relativeX": 10, "relativeY": 10})
-    for x in (20, 30, 40):
-        v.handle_mouse({"type": "mousemove", "relativeX": x, "relativeY": 12, "buttons": 1})
-    v.handle_mouse({"type": "wheel", "deltaY": -3})
-    v.refine()
-    assert drawn == []  # camera moves and refinement leave the histogram as it is
-    before = v.hist.value
-    v.point_a.value = 0.77
-    assert len(drawn) == 1 and v.hist.value != before
-    v.point.value = 1 - v.point.value  # selecting another point redraws it (the red square moves)
-    assert len(drawn) == 2
-    v.close()
-
-
-def test_viewer_reset_acts_on_the_loaded_scene(tmp_path):
-    pytest.importorskip("ipywidgets")
-    import ipywidgets as w
-
-    from tetvr.widget import Viewer
-
-    v = Viewer(_scene(tmp_path), renderer=RecordingRenderer(), clock=Clock())
-    other = tmp_path / "other.json"
-    data = json.loads((tmp_path / "scene.json").read_text())
-    data["camera"] = {"fit": {"direction": [1, 0, 0]}}
-    other.write_text(json.dumps(data))
-    v.path.value = str(other)
-    v._load()
-    home = v.model.control.home
-    v.model.control.azimuth(30.0)
-
-    def buttons(widget):
-        if isinstance(widget, w.Button):
-            yield widget
-        for child in getattr(widget, "children", ()):
-            yield from buttons(child)
-
-    reset = next(b for b in buttons(v.widget) if b.description == "⟲")
-    reset.click()
-    assert v.model.camera == home == tetvr.load_scene(other).camera
-    v.close()
+    v = Viewer(tetvr.demo_scene_path(), size=(48, 36))
+    assert v.loop.wait_idle(60)
+    assert v.loop.last_frame.error is None, v.loop.last_error
+    renderer = v.model.renderer
+    assert renderer.gpu_bytes() > 0
+    v.canvas.close()  # what the front end's close does
+    assert v.closed and v.loop.closed and not v.loop._thread.is_alive()
+    assert renderer._released and v.model._renderer is None
+    assert v.canvas.comm is None and v.hist.comm is None
 
 
 def test_view_without_a_display_says_so(tmp_path, monkeypatch, capsys):

@@ -1,4 +1,4 @@
-"""Interactive viewing: a Jupyter widget (ipywidgets) and a desktop window (``tetvr view``).
+"""Interactive viewing: a Jupyter viewer (``jupyter_rfb``) and a desktop window (``tetvr view``).
 
 The logic is plain Python and testable without a browser or a display:
 
@@ -8,19 +8,20 @@ The logic is plain Python and testable without a browser or a display:
   smaller image with the previous visibility order (no sort); once nothing has changed
   for ``settle_s`` seconds, draw the full-size frame with a fresh sort;
 * :class:`TransferFunctionEditor` — opacity control points over a colour map, drawn over
-  a log-scaled histogram of the scalar values (:func:`histogram_image`);
+  a log-scaled histogram of the scalar values (:mod:`tetvr.widget_editor`);
 * :class:`ViewerModel` — a scene plus the three above, which renders frames and saves and
-  loads the scene JSON.
+  loads the scene JSON;
+* :class:`~tetvr.widget_loop.RenderLoop` — the thread that owns the renderer and draws the
+  latest wanted state (previews while input continues, the full frame when it stops).
 
-The front-ends are thin: :class:`Viewer` (needs ``ipywidgets``; ``ipyevents``, if
-installed, adds mouse drag and wheel on the image) and :func:`run_desktop` (needs
-``moderngl-window`` and a display).
+The front-ends are thin: :class:`Viewer` (:mod:`tetvr.widget_jupyter`, needs
+``jupyter_rfb``) and :func:`run_desktop` (needs ``moderngl-window`` and a display).
 
 Examples
 --------
 >>> import tetvr                                                     # doctest: +SKIP
 >>> from tetvr.widget import Viewer                                 # doctest: +SKIP
->>> Viewer(tetvr.load_scene("scene.json"))    # doctest: +SKIP
+>>> Viewer("post.vtk")                          # doctest: +SKIP
 """
 
 from __future__ import annotations
@@ -51,8 +52,12 @@ __all__ = [
     "TransferFunctionEditor",
     "ViewerModel",
     "Viewer",
+    "HistogramPicker",
     "histogram_image",
+    "legend_image",
     "log_histogram",
+    "nice_ticks",
+    "scene_of",
     "png_bytes",
     "list_fields",
     "run_desktop",
@@ -265,192 +270,50 @@ class ProgressiveRefiner:
         return None if self.state == "idle" else self.settle_s
 
 
-# ---------------------------------------------------------------- transfer-function editing
-def log_histogram(values: ArrayLike, scalar_range: tuple[float, float], bins: int = 64
-                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(log10(1 + count), edges)`` of the values in ``scalar_range``."""
-    counts, edges = np.histogram(np.asarray(values, dtype=np.float64), bins=bins, range=scalar_range)
-    return np.log10(1.0 + counts), edges
+from .widget_editor import (HistogramPicker, TransferFunctionEditor, histogram_image,  # noqa: E402
+                            legend_image, log_histogram, nice_ticks)
+
+#: The full frame's size when the viewer is given a mesh rather than a scene.
+DEFAULT_SIZE = (560, 420)
+_SCENE_SUFFIXES = (".json", ".pvsm")
 
 
-def histogram_image(values: ArrayLike, tf: TransferFunction, scalar_range: tuple[float, float], *,
-                    size: tuple[int, int] = (360, 120), bins: int = 72,
-                    points: Sequence[tuple[float, float]] = (), selected: int | None = None) -> NDArray[np.float32]:
-    """The transfer-function editor's picture: a log-scaled histogram of ``values`` with
-    bars in the transfer function's colour, the opacity curve over it (white line, dark
-    rim) and the control ``points`` (``(t, a)``, ``t`` in [0, 1] of the range) as squares,
-    the ``selected`` one red. Premultiplied RGBA, opaque, row 0 at the top."""
-    w, h = int(size[0]), int(size[1])
-    lo, hi = (float(v) for v in scalar_range)
-    img = np.zeros((h, w, 4), np.float32)
-    img[...] = (0.12, 0.12, 0.14, 1.0)
-    logc, _ = log_histogram(values, (lo, hi), bins)
-    top = max(float(logc.max()), 1e-12)
-    xs = lo + (hi - lo) * (np.arange(w) + 0.5) / w
-    rgb, alpha = tf.evaluate(xs)
-    bar_h = np.round(logc[np.minimum((np.arange(w) * bins) // w, bins - 1)] / top * (h - 4)).astype(int)
-    rows = np.arange(h)[:, None]
-    bars = rows >= (h - bar_h)[None, :]
-    img[..., :3] = np.where(bars[..., None], (0.35 + 0.65 * rgb[None, :, :]).astype(np.float32), img[..., :3])
-    # Opacity curve: y = a, 2 px thick with a dark rim so it reads over any bar colour.
-    y = np.clip(np.round((1.0 - alpha) * (h - 3)).astype(int) + 1, 1, h - 2)
-    for col in range(w):  # each column: from the previous column's height to its own
-        y0 = y[col] if col == 0 else y[col - 1]
-        a, b = sorted((int(y0), int(y[col])))
-        img[max(a - 1, 0):b + 2, col, :3] = 0.0
-        img[a:b + 1, col, :3] = 1.0
-    for i, (pt, pa) in enumerate(points):
-        cx = int(round(float(pt) * (w - 1)))
-        cy = int(round((1.0 - float(pa)) * (h - 3))) + 1
-        colour = (1.0, 0.2, 0.2) if i == selected else (1.0, 1.0, 1.0)
-        img[max(cy - 3, 0):cy + 4, max(cx - 3, 0):cx + 4, :3] = 0.0
-        img[max(cy - 2, 0):cy + 3, max(cx - 2, 0):cx + 3, :3] = colour
-    return img
+def __getattr__(name: str) -> Any:
+    # The Jupyter front end imports jupyter_rfb; it loads only when asked for.
+    if name == "Viewer":
+        from .widget_jupyter import Viewer
+
+        return Viewer
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-class TransferFunctionEditor:
-    """Editable opacity control points over a colour map.
+def scene_of(source: "Scene | TetMesh | str | os.PathLike[str]", *, size: tuple[int, int] | None = None) -> Scene:
+    """A :class:`Scene` from a scene, a scene file (``.json``, ``.pvsm``), a mesh file
+    (any :func:`tetvr.read` reads) or a :class:`TetMesh`: the mesh ones get the default
+    transfer function and a fitted camera. ``size`` replaces the scene's size."""
+    if isinstance(source, Scene):
+        scene = source
+    elif isinstance(source, TetMesh):
+        scene = Scene(mesh_path="", mesh=source, tf=default_transfer_function(source), camera=Camera.fit(source),
+                      size=DEFAULT_SIZE, scalars=source.scalar_name)
+    elif isinstance(source, (str, os.PathLike)):
+        path = Path(source)
+        if not path.exists():
+            raise FileNotFoundError(f"{os.fspath(source)!r}: no such scene or mesh file")
+        if path.suffix.lower() in _SCENE_SUFFIXES:
+            scene = load_scene(path)
+        else:
+            from .mesh import read
 
-    Points are ``(t, a)``: ``t`` in [0, 1] across ``scalar_range``, ``a`` the opacity per
-    ``unit_distance``. The two end points stay at ``t = 0`` and ``t = 1``; interior points
-    keep their order (a move is clamped between the neighbours).
-
-    Parameters
-    ----------
-    scalar_range : (lo, hi) the colour map and the points stretch over.
-    colormap : a name for :func:`tetvr.colormaps.colormap` (tetvr preset or matplotlib),
-        or ``None`` to keep ``color`` (explicit ``(t, r, g, b)`` rows).
-    points : the opacity control points.
-    unit_distance : world length over which opacity ``a`` is reached.
-
-    Examples
-    --------
-    >>> ed = TransferFunctionEditor((0.0, 10.0), points=[(0, 0), (1, 1)], unit_distance=0.5)
-    >>> ed.add_point(0.5, 0.2)
-    1
-    >>> ed.transfer_function().opacity
-    ((0.0, 0.0), (5.0, 0.2), (10.0, 1.0))
-    """
-
-    MIN_GAP = 1e-4
-
-    def __init__(self, scalar_range: tuple[float, float], *, colormap: str | None = "viridis",
-                 points: Sequence[tuple[float, float]] = ((0.0, 0.0), (1.0, 0.5)), unit_distance: float = 1.0,
-                 color: Sequence[tuple[float, float, float, float]] | None = None) -> None:
-        self.scalar_range = _range(scalar_range)
-        if colormap is None and color is None:
-            raise ValueError("give a colormap name or explicit color rows")
-        self.colormap = colormap
-        self.color = None if color is None else tuple(tuple(float(v) for v in row) for row in color)
-        pts = sorted((float(t), float(a)) for t, a in points)
-        if len(pts) < 2:
-            raise ValueError(f"need at least 2 opacity points, got {len(pts)}")
-        pts[0] = (0.0, pts[0][1])
-        pts[-1] = (1.0, pts[-1][1])
-        self.points: list[tuple[float, float]] = [(t, float(np.clip(a, 0, 1))) for t, a in pts]
-        self.unit_distance = float(unit_distance)
-        self.transfer_function()  # validates everything
-
-    @classmethod
-    def from_transfer_function(cls, tf: TransferFunction, *, colormap: str | None = None) -> "TransferFunctionEditor":
-        """An editor holding ``tf`` (its colour kept explicitly unless ``colormap`` is given)."""
-        lo, hi = tf.domain
-        if hi <= lo:
-            hi = lo + 1.0
-        span = hi - lo
-        color = [((x - lo) / span, r, g, b) for x, r, g, b in tf.color]
-        pts = [((x - lo) / span, a) for x, a in tf.opacity]
-        if pts[0][0] > 0:
-            pts.insert(0, (0.0, pts[0][1]))
-        if pts[-1][0] < 1:
-            pts.append((1.0, pts[-1][1]))
-        return cls((lo, hi), colormap=colormap, color=None if colormap else color, points=pts,
-                   unit_distance=tf.unit_distance)
-
-    # ---- edits ----
-    def add_point(self, t: float, a: float) -> int:
-        """Insert a point (or set the opacity of the one at ``t``); returns its index."""
-        t = float(np.clip(t, 0.0, 1.0))
-        a = float(np.clip(a, 0.0, 1.0))
-        for i, (ti, _) in enumerate(self.points):
-            if abs(ti - t) < self.MIN_GAP:
-                self.points[i] = (ti, a)
-                return i
-        i = int(np.searchsorted([p[0] for p in self.points], t))
-        self.points.insert(i, (t, a))
-        return i
-
-    def move_point(self, index: int, t: float | None = None, a: float | None = None) -> tuple[float, float]:
-        """Move point ``index``; end points move in opacity only. Returns where it went."""
-        self._check_index(index)
-        ti, ai = self.points[index]
-        if t is not None and 0 < index < len(self.points) - 1:
-            lo = self.points[index - 1][0] + self.MIN_GAP
-            hi = self.points[index + 1][0] - self.MIN_GAP
-            ti = float(np.clip(t, lo, hi))
-        if a is not None:
-            ai = float(np.clip(a, 0.0, 1.0))
-        self.points[index] = (ti, ai)
-        return self.points[index]
-
-    def remove_point(self, index: int) -> None:
-        """Remove an interior point (the two ends stay)."""
-        self._check_index(index)
-        if index in (0, len(self.points) - 1):
-            raise ValueError("the end points at t = 0 and t = 1 cannot be removed")
-        del self.points[index]
-
-    def nearest_point(self, t: float, a: float, *, aspect: float = 3.0) -> int:
-        """Index of the point closest to ``(t, a)`` (``t`` weighted by ``aspect``, the
-        width/height ratio of the picture the user clicks in)."""
-        d = [(aspect * (ti - t)) ** 2 + (ai - a) ** 2 for ti, ai in self.points]
-        return int(np.argmin(d))
-
-    def set_range(self, lo: float, hi: float) -> None:
-        self.scalar_range = _range((lo, hi))
-
-    def set_colormap(self, name: str) -> None:
-        from .colormaps import colormap
-
-        colormap(name, self.scalar_range)  # fails here, not at the next render
-        self.colormap = name
-        self.color = None
-
-    def set_unit_distance(self, u: float) -> None:
-        u = float(u)
-        if not (math.isfinite(u) and u > 0):
-            raise ValueError(f"unit_distance must be positive, got {u!r}")
-        self.unit_distance = u
-
-    def _check_index(self, index: int) -> None:
-        if not (isinstance(index, (int, np.integer)) and 0 <= index < len(self.points)):
-            raise IndexError(f"point index {index!r} outside 0..{len(self.points) - 1}")
-
-    # ---- results ----
-    def transfer_function(self) -> TransferFunction:
-        from .colormaps import colormap
-
-        lo, hi = self.scalar_range
-        opacity = [(t, a) for t, a in self.points]
-        if self.colormap is not None:
-            return colormap(self.colormap, (lo, hi), opacity=opacity, unit_distance=self.unit_distance)
-        assert self.color is not None
-        color = tuple((lo + (hi - lo) * t, r, g, b) for t, r, g, b in self.color)
-        op = tuple((lo + (hi - lo) * t, a) for t, a in opacity)
-        return TransferFunction(color=color, opacity=op, unit_distance=self.unit_distance)
-
-    def image(self, values: ArrayLike, *, size: tuple[int, int] = (360, 120), selected: int | None = None
-              ) -> NDArray[np.float32]:
-        """The editor's picture over ``values`` (see :func:`histogram_image`)."""
-        return histogram_image(values, self.transfer_function(), self.scalar_range, size=size,
-                               points=self.points, selected=selected)
-
-
-def _range(r: Sequence[float]) -> tuple[float, float]:
-    lo, hi = (float(v) for v in r)
-    if not (math.isfinite(lo) and math.isfinite(hi)) or hi <= lo:
-        raise ValueError(f"scalar range must be finite with lo < hi, got {tuple(r)!r}")
-    return lo, hi
+            scene = dataclasses.replace(scene_of(read(path)), mesh_path=str(path.resolve()))
+    else:
+        raise TypeError(f"show a Scene, a TetMesh or the path of a scene or mesh file, got {type(source).__name__}")
+    if size is not None:
+        w, h = (int(v) for v in size)
+        if w < 1 or h < 1:
+            raise ValueError(f"size must be two positive integers, got {size!r}")
+        scene = dataclasses.replace(scene, size=(w, h))
+    return scene
 
 
 # ---------------------------------------------------------------- the model behind any front-end
@@ -469,14 +332,15 @@ class ViewerModel:
 
     Parameters
     ----------
-    scene : the scene to show, or a scene JSON path (its size is the refined frame's size).
+    scene : the scene to show: a :class:`Scene`, a scene or mesh file, or a :class:`TetMesh`
+        (:func:`scene_of`); its size is the full frame's size.
     renderer : anything with ``render(mesh, camera, tf, size=, order=)`` (default: a
         :class:`tetvr.gl.Renderer` made on the first frame and released by :meth:`close`).
     preview_scale, settle_s : see :class:`ProgressiveRefiner`.
     clock : the time source (tests pass a fake one).
     """
 
-    def __init__(self, scene: Scene | str | os.PathLike[str], *, renderer: Any = None, preview_scale: float = 0.5,
+    def __init__(self, scene: Scene | TetMesh | str | os.PathLike[str], *, renderer: Any = None, preview_scale: float = 0.5,
                  settle_s: float = 0.3, clock: Callable[[], float] = time.monotonic) -> None:
         self._renderer = renderer
         self._own_renderer = renderer is None
@@ -490,10 +354,9 @@ class ViewerModel:
         self.load(scene)
 
     # ---- scene in, scene out ----
-    def load(self, scene: Scene | str | os.PathLike[str]) -> None:
-        """Show another scene (a :class:`Scene` or a scene JSON path)."""
-        if not isinstance(scene, Scene):
-            scene = load_scene(scene)
+    def load(self, scene: Scene | TetMesh | str | os.PathLike[str]) -> None:
+        """Show another scene (anything :func:`scene_of` takes)."""
+        scene = scene_of(scene)
         if self._renderer is not None and self._own_renderer and scene.settings != self.settings:
             self.close()  # made with the old settings: the next frame makes one with the new
         self.mesh_path = scene.mesh_path
@@ -511,6 +374,14 @@ class ViewerModel:
         self.order = None
         # The fields tetvr.read found in the file; a mesh built in memory has only its own.
         self.fields = list(scene.mesh.report.fields) or [self.field]
+        self.hist_cache: dict[tuple[Any, ...], NDArray[np.float64]] = {}
+
+    def log_counts(self, bins: int = 72) -> NDArray[np.float64]:
+        """The field's log histogram over the editor's range, computed once per (field, range)."""
+        key = (self.field, self.editor.scalar_range, bins)
+        if key not in self.hist_cache:
+            self.hist_cache[key] = log_histogram(self.mesh.scalars, self.editor.scalar_range, bins)[0]
+        return self.hist_cache[key]
 
     def scene(self) -> Scene:
         """The current state as a :class:`Scene` (for :meth:`Scene.save` and ``tetvr render``)."""
@@ -520,6 +391,9 @@ class ViewerModel:
 
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the current scene JSON (paths relative to it)."""
+        if not self.mesh_path:
+            raise ValueError("this mesh was given in memory: write it to a file (meshio) and view that file "
+                             "to save a scene that refers to it")
         self.scene().save(path)
         return Path(path)
 
@@ -556,20 +430,23 @@ class ViewerModel:
         return self._renderer
 
     def render(self, request: RenderRequest) -> NDArray[np.float32]:
-        """Draw what ``request`` asks for."""
-        from .sort import visibility_order
+        """Draw what ``request`` asks for, of the current state."""
+        return self.draw(self.mesh, self.camera, self.editor.transfer_function(), request)
 
+    def draw(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, request: RenderRequest
+             ) -> NDArray[np.float32]:
+        """Draw ``request`` of an explicit state (the render loop's snapshot of it)."""
         from .method import choose
+        from .sort import visibility_order
 
         t0 = time.perf_counter()
         order = None  # tet marching needs no order
-        if choose(self.settings, self.mesh) == "projected":
+        if choose(self.settings, mesh) == "projected":
             # Projected tetrahedra: previews reuse the last order; refined frames sort anew.
-            if request.sort or self.order is None or self.order.shape[0] != self.mesh.n_tets:
-                self.order = visibility_order(self.mesh, self.camera, self.settings.sort)
+            if request.sort or self.order is None or self.order.shape[0] != mesh.n_tets:
+                self.order = visibility_order(mesh, camera, self.settings.sort)
             order = self.order
-        image = self.renderer.render(self.mesh, self.camera, self.editor.transfer_function(), size=request.size,
-                                     order=order)
+        image = self.renderer.render(mesh, camera, tf, size=request.size, order=order)
         self.last_seconds = time.perf_counter() - t0
         self.last_request = request
         return image
@@ -592,307 +469,6 @@ class ViewerModel:
             self._renderer.release()
         self._renderer = None
 
-
-# ---------------------------------------------------------------- Jupyter front-end
-class Viewer:
-    """An ipywidgets viewer of a scene (``pip install ipywidgets``; ``ipyevents`` for
-    mouse drag and wheel on the image).
-
-    Shows the image with orbit/zoom buttons, field and colour-map pickers, the
-    transfer-function editor over the histogram, and scene save/load. While the user
-    interacts it draws previews; ``settle_s`` seconds after the last change it draws the
-    refined frame (asyncio timer in the kernel; :meth:`refine` does it by hand).
-
-    Examples
-    --------
-    >>> v = Viewer(tetvr.load_scene("scene.json"))        # doctest: +SKIP
-    >>> v                                                  # doctest: +SKIP
-    """
-
-    def __init__(self, scene: Scene | str | os.PathLike[str], *, preview_scale: float = 0.5, settle_s: float = 0.3,
-                 step_degrees: float = 15.0, renderer: Any = None, clock: Callable[[], float] = time.monotonic) -> None:
-        try:
-            import ipywidgets as w
-        except ImportError:
-            raise ImportError("the Jupyter viewer needs ipywidgets: pip install ipywidgets") from None
-        self.model = ViewerModel(scene, renderer=renderer, preview_scale=preview_scale, settle_s=settle_s, clock=clock)
-        self.step_degrees = float(step_degrees)
-        self._timer: Any = None
-        self._selected = 0
-        self._syncing = False
-        m = self.model
-        width, height = m.size
-        self.image = w.Image(format="png", layout=w.Layout(width=f"{width}px", height=f"{height}px"))
-        self.status = w.Label()
-
-        def button(label: str, tip: str, fn: Callable[[], Any]) -> Any:
-            b = w.Button(description=label, tooltip=tip, layout=w.Layout(width="44px"))
-            b.on_click(lambda _b: self._camera(fn))
-            return b
-
-        nav = w.HBox([
-            button("◀", "orbit left", lambda: m.control.azimuth(-self.step_degrees)),
-            button("▶", "orbit right", lambda: m.control.azimuth(self.step_degrees)),
-            button("▲", "orbit up", lambda: m.control.elevation(self.step_degrees)),
-            button("▼", "orbit down", lambda: m.control.elevation(-self.step_degrees)),
-            button("+", "zoom in", lambda: m.control.zoom(1.25)),
-            button("−", "zoom out", lambda: m.control.zoom(0.8)),
-            button("⟲", "reset the camera", lambda: m.control.reset()),  # the control load() made
-        ])
-        self.field = w.Dropdown(options=m.fields, value=m.field, description="field")
-        cmaps = tuple(c for c in PICKER_COLORMAPS if c in PRESETS or _has_matplotlib())
-        options, initial = _colormap_choice(cmaps, m.editor.colormap)
-        self.colormap = w.Dropdown(options=options, value=initial, description="colours")
-        self.unit = w.FloatLogSlider(value=m.editor.unit_distance, base=10,
-                                     min=math.log10(m.editor.unit_distance) - 3,
-                                     max=math.log10(m.editor.unit_distance) + 3, step=0.05,
-                                     description="unit dist.", readout_format=".3g")
-        lo, hi = m.editor.scalar_range
-        self.lo = w.FloatText(value=lo, description="range", layout=w.Layout(width="190px"))
-        self.hi = w.FloatText(value=hi, layout=w.Layout(width="110px"))
-        self.hist = w.Image(format="png", layout=w.Layout(width="360px", height="120px"))
-        self.point = w.Dropdown(description="point", layout=w.Layout(width="160px"))
-        self.point_t = w.FloatSlider(min=0, max=1, step=0.001, description="position", readout_format=".3f")
-        self.point_a = w.FloatSlider(min=0, max=1, step=0.001, description="opacity", readout_format=".3f")
-        add = w.Button(description="add point", layout=w.Layout(width="100px"))
-        remove = w.Button(description="remove", layout=w.Layout(width="100px"))
-        add.on_click(lambda _b: self._add_point())
-        remove.on_click(lambda _b: self._remove_point())
-        self.path = w.Text(value="scene.json", description="scene file")
-        save = w.Button(description="save", layout=w.Layout(width="70px"))
-        load = w.Button(description="load", layout=w.Layout(width="70px"))
-        save.on_click(lambda _b: self._save())
-        load.on_click(lambda _b: self._load())
-        refine = w.Button(description="refine", tooltip="draw the full frame now", layout=w.Layout(width="70px"))
-        refine.on_click(lambda _b: self.refine())
-
-        self.field.observe(lambda c: self._on_field(c["new"]), names="value")
-        self.colormap.observe(lambda c: self._on_colormap(c["new"]), names="value")
-        self.unit.observe(lambda c: self._tf(lambda: m.editor.set_unit_distance(c["new"])), names="value")
-        for box in (self.lo, self.hi):
-            box.observe(lambda _c: self._on_range(), names="value")
-        self.point.observe(lambda c: self._select(c["new"]), names="value")
-        self.point_t.observe(lambda c: self._move(t=c["new"]), names="value")
-        self.point_a.observe(lambda c: self._move(a=c["new"]), names="value")
-
-        tf_box = w.VBox([self.hist, w.HBox([self.lo, self.hi]), w.HBox([self.point, add, remove]),
-                         self.point_t, self.point_a])
-        side = w.VBox([self.field, self.colormap, self.unit, tf_box, w.HBox([self.path, save, load]), refine])
-        self.widget = w.VBox([w.HBox([w.VBox([self.image, nav, self.status]), side])])
-        self._mouse = self._attach_mouse()
-        self._sync_points()
-        self._show(m.final())
-        self._show_hist()
-
-    # ---- display ----
-    def _ipython_display_(self) -> None:  # pragma: no cover - needs a front-end
-        from IPython.display import display
-
-        display(self.widget)
-
-    def _repr_mimebundle_(self, **kw: Any) -> Any:  # pragma: no cover - needs a front-end
-        return self.widget._repr_mimebundle_(**kw)
-
-    def _show(self, image: NDArray[np.float32]) -> None:
-        m = self.model
-        self.image.value = png_bytes(image, m.background)
-        req = m.last_request
-        kind = "refined" if req is None or req.final else "preview"
-        w, h = (req.size if req else m.size)
-        self.status.value = f"{kind} {w}x{h}: {m.last_seconds * 1000:.0f} ms"
-
-    def _show_hist(self) -> None:
-        """Redraw the transfer-function picture (after an edit, not after a camera move)."""
-        m = self.model
-        self.hist.value = png_bytes(m.editor.image(m.mesh.scalars, selected=self._selected), None)
-
-    # ---- events ----
-    def _changed(self, *, camera: bool) -> None:
-        self._show(self.model.changed(camera=camera))
-        self._schedule()
-
-    def _camera(self, fn: Callable[[], Any]) -> None:
-        fn()
-        self._changed(camera=True)
-
-    def _tf(self, fn: Callable[[], Any]) -> None:
-        if self._syncing:
-            return
-        try:
-            fn()
-        except ValueError as exc:
-            self.status.value = f"error: {exc}"
-            return
-        self._changed(camera=False)
-        self._show_hist()
-
-    def _on_field(self, name: str) -> None:
-        if self._syncing:
-            return
-        try:
-            self.model.set_field(name)
-        except (KeyError, ValueError) as exc:
-            self.status.value = f"error: {exc}"
-            return
-        self._sync_range()
-        self._changed(camera=False)
-        self._show_hist()
-
-    def _on_colormap(self, name: str) -> None:
-        if name != "(scene)":
-            self._tf(lambda: self.model.set_colormap(name))
-
-    def _on_range(self) -> None:
-        self._tf(lambda: self.model.editor.set_range(self.lo.value, self.hi.value))
-
-    def _select(self, index: Any) -> None:
-        if index is None or self._syncing:
-            return
-        self._selected = int(index)
-        self._sync_points()
-        self._show_hist()
-
-    def _move(self, t: float | None = None, a: float | None = None) -> None:
-        self._tf(lambda: self.model.editor.move_point(self._selected, t=t, a=a))
-
-    def _add_point(self) -> None:
-        ed = self.model.editor
-        # Halfway between the selected point and the next one (or the previous, at the end).
-        j = min(self._selected, len(ed.points) - 2)
-        (t0, a0), (t1, a1) = ed.points[j], ed.points[j + 1]
-        self._selected = ed.add_point(0.5 * (t0 + t1), 0.5 * (a0 + a1))
-        self._sync_points()
-        self._changed(camera=False)
-        self._show_hist()
-
-    def _remove_point(self) -> None:
-        try:
-            self.model.editor.remove_point(self._selected)
-        except ValueError as exc:
-            self.status.value = f"error: {exc}"
-            return
-        self._selected = max(self._selected - 1, 0)
-        self._sync_points()
-        self._changed(camera=False)
-        self._show_hist()
-
-    def _sync_points(self) -> None:
-        ed = self.model.editor
-        self._syncing = True
-        try:
-            self._selected = min(self._selected, len(ed.points) - 1)
-            self.point.options = [(f"{i}: t={t:.3f}", i) for i, (t, _) in enumerate(ed.points)]
-            self.point.value = self._selected
-            t, a = ed.points[self._selected]
-            self.point_t.value, self.point_a.value = t, a
-            self.point_t.disabled = self._selected in (0, len(ed.points) - 1)
-        finally:
-            self._syncing = False
-
-    def _sync_range(self) -> None:
-        self._syncing = True
-        try:
-            self.lo.value, self.hi.value = self.model.editor.scalar_range
-        finally:
-            self._syncing = False
-
-    def _save(self) -> None:
-        try:
-            path = self.model.save(self.path.value)
-            self.status.value = f"saved {path}"
-        except (OSError, ValueError) as exc:
-            self.status.value = f"error: {exc}"
-
-    def _load(self) -> None:
-        try:
-            self.model.load(self.path.value)
-        except (OSError, ValueError, KeyError) as exc:
-            self.status.value = f"error: {exc}"
-            return
-        m = self.model
-        self._syncing = True
-        try:
-            self.field.options = m.fields
-            self.field.value = m.field
-            options, value = _colormap_choice(tuple(self.colormap.options), m.editor.colormap)
-            if options != tuple(self.colormap.options):
-                self.colormap.options = options
-            self.colormap.value = value
-            self.unit.value = m.editor.unit_distance
-        finally:
-            self._syncing = False
-        self._sync_range()
-        self._selected = 0
-        self._sync_points()
-        self._show(m.final())
-        self._show_hist()
-
-    # ---- refinement ----
-    def refine(self) -> None:
-        """Draw the refined frame now (also what the timer does)."""
-        self._cancel()
-        self._show(self.model.final())
-
-    def _poll(self) -> None:
-        self._timer = None
-        image = self.model.poll()
-        if image is not None:
-            self._show(image)
-        elif self.model.refiner.state == "interacting":
-            self._schedule()
-
-    def _schedule(self) -> None:
-        import asyncio
-
-        self._cancel()
-        try:
-            loop = asyncio.get_running_loop()
-        except RuntimeError:  # no event loop (plain Python, tests): refine by hand
-            return
-        self._timer = loop.call_later(self.model.settle_s, self._poll)
-
-    def _cancel(self) -> None:
-        if self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
-
-    # ---- mouse (ipyevents) ----
-    def _attach_mouse(self) -> Any:
-        try:
-            from ipyevents import Event
-        except ImportError:
-            return None
-        ev = Event(source=self.image, watched_events=["mousedown", "mouseup", "mousemove", "mouseleave", "wheel"],
-                   prevent_default_action=True, wait=30)
-        self._drag_from: tuple[float, float] | None = None
-        ev.on_dom_event(self.handle_mouse)
-        return ev
-
-    def handle_mouse(self, event: dict[str, Any]) -> None:
-        """An ipyevents DOM event: drag with the left button orbits, with shift pans;
-        the wheel zooms."""
-        kind = event.get("type")
-        x, y = float(event.get("relativeX", 0)), float(event.get("relativeY", 0))
-        if kind == "mousedown":
-            self._drag_from = (x, y)
-        elif kind in ("mouseup", "mouseleave"):
-            self._drag_from = None
-        elif kind == "mousemove" and self._drag_from is not None and event.get("buttons", 0):
-            dx, dy = x - self._drag_from[0], y - self._drag_from[1]
-            self._drag_from = (x, y)
-            if event.get("shiftKey"):
-                self._camera(lambda: self.model.control.pan(dx, dy, self.model.size))  # type: ignore[arg-type]
-            else:
-                self._camera(lambda: self.model.control.drag(dx, dy))
-        elif kind == "wheel":
-            dy = float(event.get("deltaY", 0))
-            if dy:
-                self._camera(lambda: self.model.control.zoom(1.1 if dy < 0 else 1 / 1.1))
-
-    def close(self) -> None:
-        self._cancel()
-        self.model.close()
-        self.widget.close()
 
 
 def _colormap_choice(options: tuple[str, ...], colormap: str | None) -> tuple[tuple[str, ...], str]:
