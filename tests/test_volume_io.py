@@ -58,14 +58,14 @@ def _ramp(shape=(3, 4, 5), dtype=np.int16) -> np.ndarray:
 
 # file, dims (nx, ny, nz), spacing, dtype, value range, needs
 SHARED_VOLUMES = [
-    ("volumes/headsq/quarter.nhdr", (64, 64, 93), (3.2, 3.2, 1.5), "int16", (0, 3926), None),
-    ("volumes/HeadMRVolume.mhd", (48, 62, 42), (4.0, 4.0, 4.0), "uint8", (0, 255), None),
-    ("volumes/LIDC2.mha", (256, 256, 133), (1.40625, 1.40625, 2.5), "uint8", (0, 255), None),
+    ("volumes/headsq/quarter.nhdr", (64, 64, 93), (3.2, 3.2, 1.5), "int16", (0, 3926), "SimpleITK"),
+    ("volumes/HeadMRVolume.mhd", (48, 62, 42), (4.0, 4.0, 4.0), "uint8", (0, 255), "SimpleITK"),
+    ("volumes/LIDC2.mha", (256, 256, 133), (1.40625, 1.40625, 2.5), "uint8", (0, 255), "SimpleITK"),
     ("volumes/aneurism.vti", (256, 256, 256), (1.0, 1.0, 1.0), "uint8", (0, 255), None),
     ("volumes/hydrogen.vti", (64, 64, 64), (1.0, 1.0, 1.0), "float32", (0, 1), None),
     ("volumes/carotid.vtk", (76, 49, 45), (1.0, 1.0, 1.0), "float32", (0, 580), None),
-    ("volumes/avg152T1_RL_nifti.nii.gz", (91, 109, 91), (2.0, 2.0, 2.0), "uint8", (0, 255), "nibabel"),
-    ("volumes/CT_small.dcm", (128, 128, 1), (0.661468, 0.661468, 5.0), "int16", (-896, 1167), "pydicom"),
+    ("volumes/avg152T1_RL_nifti.nii.gz", (91, 109, 91), (2.0, 2.0, 2.0), "uint8", (0, 255), "SimpleITK"),
+    ("volumes/CT_small.dcm", (128, 128, 1), (0.661468, 0.661468, 5.0), "int16", (-896, 1167), "SimpleITK"),
 ]
 
 
@@ -182,10 +182,12 @@ def test_nrrd_detached_slices_with_space_directions_in_ras(tmp_path):
 
 def test_nrrd_ascii_and_list_of_files(tmp_path):
     data = _ramp(dtype=np.int32)
-    (tmp_path / "a.txt").write_text(" ".join(str(v) for v in data[:2].ravel()))
-    (tmp_path / "b.txt").write_text("\n".join(str(v) for v in data[2:].ravel()))
+    # One file per slice (teem, the NRRD reference reader, wants one per slab of the last axis).
+    (tmp_path / "a.txt").write_text(" ".join(str(v) for v in data[0].ravel()))
+    (tmp_path / "b.txt").write_text("\n".join(str(v) for v in data[1].ravel()))
+    (tmp_path / "c.txt").write_text("\n".join(" ".join(str(v) for v in row) for row in data[2]))
     (tmp_path / "v.nhdr").write_text("NRRD0004\ntype: int\ndimension: 3\nsizes: 5 4 3\nencoding: ascii\n"
-                                     "data file: LIST\na.txt\nb.txt\n")
+                                     "data file: LIST\na.txt\nb.txt\nc.txt\n")
     vol = read_nrrd(tmp_path / "v.nhdr")
     np.testing.assert_array_equal(vol.data, data)
     assert vol.dtype == np.int32
@@ -386,6 +388,37 @@ def test_dicom_series_sorted_by_position_with_rescale(tmp_path):
     np.testing.assert_allclose(vol.origin, [5.0, -3.0, 40.0])
 
 
+def test_dicom_series_written_by_itk_reads_in_slice_order_whatever_the_file_order(tmp_path):
+    sitk = pytest.importorskip("SimpleITK", reason="SimpleITK (pip install tetvr[volumes]) is not installed")
+    rng = np.random.default_rng(19)
+    data = rng.integers(0, 4000, size=(6, 5, 7)).astype(np.int16)
+    data[:, 0, 0] = np.arange(6) * 100  # slice k is recognisable by its first voxel
+    iop = (0.0, 1.0, 0.0, 0.0, 0.0, -1.0)  # sagittal: rows along y, columns down z
+    normal = np.cross(iop[:3], iop[3:])
+    origin = np.array([5.0, -3.0, 40.0])
+    names = [f"IM{n:02d}.dcm" for n in rng.permutation(6)]  # file names in shuffled order
+    writer = sitk.ImageFileWriter()
+    writer.KeepOriginalImageUIDOn()
+    for k in rng.permutation(6):  # and written in shuffled order
+        img = sitk.GetImageFromArray(data[k])
+        img.SetSpacing((0.6, 0.7))
+        for tag, value in [("0008|0060", "CT"), ("0020|000d", "1.2.3"), ("0020|000e", "1.2.3.4"),
+                           ("0008|0018", f"1.2.3.4.{k + 1}"), ("0020|0013", str(6 - k)),  # InstanceNumber lies
+                           ("0020|0037", "\\".join(map(str, iop))),
+                           ("0020|0032", "\\".join(f"{v:.6f}" for v in origin + 2.5 * k * normal)),
+                           ("0028|0030", "0.7\\0.6")]:
+            img.SetMetaData(tag, value)
+        writer.SetFileName(str(tmp_path / names[k]))
+        writer.Execute(img)
+    vol = read_dicom(tmp_path)
+    assert vol.dims == (7, 5, 6)
+    np.testing.assert_array_equal(vol.data[:, 0, 0], np.arange(6) * 100)
+    np.testing.assert_array_equal(vol.data, data)
+    np.testing.assert_allclose(vol.spacing, [0.6, 0.7, 2.5], rtol=1e-5)
+    np.testing.assert_allclose(vol.direction, np.stack([iop[:3], iop[3:], normal], axis=1), atol=1e-6)
+    np.testing.assert_allclose(vol.origin, origin, atol=1e-5)
+
+
 def test_dicom_duplicate_slice_positions_are_rejected(tmp_path):
     raw = (_ramp((4, 3, 5), dtype=np.int32) + 1000).astype(np.uint16)
     _write_dicom_series(tmp_path / "s", raw)
@@ -536,13 +569,16 @@ def test_bad_volume_arrays():
 
 def test_missing_optional_dependency_names_the_extra(tmp_path, monkeypatch):
     (tmp_path / "v.nii").write_bytes(bytes(352))
-    monkeypatch.setitem(sys.modules, "nibabel", None)  # makes `import nibabel` fail
-    with pytest.raises(ImportError, match=r"pip install tetvr\[volumes\]"):
-        read_volume(tmp_path / "v.nii")
-    monkeypatch.setitem(sys.modules, "pydicom", None)
+    (tmp_path / "v.nrrd").write_bytes(b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n"
+                                      + bytes(8))
     (tmp_path / "d").mkdir()
-    with pytest.raises(ImportError, match=r"pip install tetvr\[volumes\]"):
-        read_volume(tmp_path / "d")
+    monkeypatch.setitem(sys.modules, "SimpleITK", None)  # makes `import SimpleITK` fail
+    for name in ("v.nii", "v.nrrd", "d"):
+        with pytest.raises(ImportError, match=r"needs SimpleITK.*pip install tetvr\[volumes\]"):
+            read_volume(tmp_path / name)
+    # VTK files and raw voxels need nothing beyond numpy.
+    (tmp_path / "v.raw").write_bytes(bytes(8))
+    assert read_raw(tmp_path / "v.raw", dims=(2, 2, 2), dtype="uint8").dims == (2, 2, 2)
 
 
 def test_shared_folder_is_reported_when_absent(monkeypatch, tmp_path):

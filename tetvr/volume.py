@@ -18,8 +18,9 @@ posterior, z superior); NIfTI uses RAS. :func:`read_volume` brings files that de
 anatomical frame into ``space="LPS"`` (the default) or ``"RAS"`` by flipping x and y;
 files without one (VTK, raw, NRRD's ``3D-right-handed``) are taken as they are.
 
-Readers: :mod:`tetvr.volume_io` reads raw, NRRD, MetaImage, VTK (``.vti``, legacy
-structured points), NIfTI and DICOM files into a :class:`Volume`; its functions are
+Readers: :mod:`tetvr.volume_io` reads NRRD, MetaImage, NIfTI and DICOM through SimpleITK
+(ITK's readers), VTK files (``.vti``, legacy structured points) through
+:mod:`tetvr.volume_vtk`, and raw voxels, into a :class:`Volume`; its functions are
 re-exported here (``tetvr.volume.read_volume`` and so on).
 
 Voxel values keep their dtype (int16 CT stays int16; nothing is quantised to 8 bits).
