@@ -12,9 +12,13 @@
 // clipped to the world clip box when u_use_clip_box is 1; t_start / t_end come per pixel
 // from u_limits when u_use_limits is 1 (for fusion with the tet mesh).
 // Samples: the entry, then entry + first + i * step, then the exit (first = step, or a
-// seeded random fraction of it with u_jitter 1); every piece between two samples is
-// looked up in the pre-integration table (lookup.glsl) with its true length, so the
-// integrated interval does not depend on the sampling.
+// seeded random fraction of it with u_jitter 1), and besides them every point where the
+// ray crosses a voxel-index plane (x, y or z integer). So every piece between two samples
+// lies inside one voxel cell, where the trilinear field is a smooth cubic along the ray:
+// taking it as linear errs by h^2/8 |s''| instead of h/4 times the jump in slope at the
+// cell's faces, and a maximum at a voxel that the ray passes through is sampled exactly.
+// Every piece is looked up in the pre-integration table (lookup.glsl) with its true
+// length, so the integrated interval does not depend on the sampling.
 //
 // RAYCAST_MODE (a define): 0 emission-absorption, 1 maximum intensity, 2 mean intensity
 // ("xray"), 3 first hit of u_iso, Blinn-Phong shaded (headlight).
@@ -108,6 +112,19 @@ void main() {
     vec3 p0_idx = o_idx + range.x * d_idx;
     float first = u_jitter == 1 ? jitter01() * dt : dt;
 
+    // Offsets of the next voxel-index plane crossed along each axis, counted from the
+    // entry (plane_first + m * plane_dt, not summed, so they do not drift); 3e38: never.
+    vec3 plane_dt = vec3(3.0e38), plane_first = vec3(3.0e38);
+    for (int a = 0; a < 3; ++a) {
+        if (d_idx[a] != 0.0) {
+            float next = d_idx[a] > 0.0 ? floor(p0_idx[a]) + 1.0 : ceil(p0_idx[a]) - 1.0;
+            plane_dt[a] = 1.0 / abs(d_idx[a]);
+            plane_first[a] = (next - p0_idx[a]) / d_idx[a];
+        }
+    }
+    vec3 plane_m = vec3(0.0);
+    float k_reg = 0.0;
+
     float off_prev = 0.0;
     float s_prev = scalar_at(p0_idx);
 #if RAYCAST_MODE == 0
@@ -121,7 +138,11 @@ void main() {
     float off_a = 0.0, off_b = 0.0, s_a = 0.0, s_b = 0.0;
 #endif
     for (int i = 0; i < u_max_steps; ++i) {
-        float off_next = min(first + float(i) * dt, len);
+        float off_reg = first + k_reg * dt;
+        vec3 off_plane = plane_first + plane_m * plane_dt;
+        float off_next = min(min(off_reg, min(off_plane.x, min(off_plane.y, off_plane.z))), len);
+        k_reg += off_reg <= off_next ? 1.0 : 0.0;
+        plane_m += vec3(lessThanEqual(off_plane, vec3(off_next)));
         float s_next = scalar_at(p0_idx + off_next * d_idx);
 #if RAYCAST_MODE == 0
         vec4 piece = lookup_segment(s_prev, s_next, (off_next - off_prev) * world_per_t);

@@ -486,7 +486,15 @@ def test_settings_round_trip_and_defaults():
     assert RaycastSettings.from_dict(s.to_dict()) == s
     assert hash(s) == hash(RaycastSettings.from_dict(s.to_dict()))
     vol = Volume.from_array(np.zeros((3, 3, 3)), spacing=(0.4, 0.2, 0.3))
-    assert RaycastSettings().step_for(vol) == pytest.approx(0.1)
+    faint = TransferFunction.preset("grayscale", (0, 1), opacity=0.01, unit_distance=10.0)
+    dense = TransferFunction.preset("grayscale", (0, 1), opacity=0.99, unit_distance=0.01)
+    # "auto": half the smallest spacing where a voxel is nearly transparent, an eighth where
+    # it is opaque; a quarter for maximum intensity whatever the opacity.
+    assert RaycastSettings().step_for(vol, faint) == pytest.approx(0.1)
+    assert RaycastSettings().step_for(vol, dense) == pytest.approx(0.025)
+    assert RaycastSettings(mode="mip").step_for(vol, dense) == pytest.approx(0.05)
+    assert RaycastSettings(step=None) == RaycastSettings(step="auto") == RaycastSettings()
+    assert RaycastSettings(step=0.3).step_for(vol, dense) == 0.3
     with pytest.raises(ValueError, match="unknown"):
         RaycastSettings.from_dict({"steps": 1})
 

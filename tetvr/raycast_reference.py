@@ -44,6 +44,7 @@ from .camera import Camera
 from .image import check_memory, image_size
 from .preintegrate import check_table_size, check_unit_distance
 from .reference import composite, integrate_segments
+from .raycast_size import AUTO_BINS, auto_bins, auto_step
 from .transfer import TransferFunction
 from .volume import Volume
 
@@ -92,8 +93,10 @@ class RaycastSettings:
         ray) or ``"isosurface"`` (first hit of ``iso_value``, Blinn–Phong shaded).
         ``mip`` and ``xray`` map the scalar they find through the transfer function:
         premultiplied ``(c a, a)``.
-    step : distance between samples in world units; ``None``: half the smallest voxel
-        spacing.
+    step : distance between regular samples in world units (the ray is also sampled
+        where it crosses a voxel-index plane), or ``"auto"`` (default; ``None`` means the
+        same): sized from the smallest voxel spacing and, for emission-absorption, the
+        transfer function's opacity (:func:`tetvr.raycast_size.auto_step`).
     termination : stop a ray once its alpha reaches this (early ray termination); 1.0
         disables it. The error it allows is at most ``1 - termination`` per pixel.
     jitter : offset every ray's first sample by a random fraction of a step (seeded by
@@ -107,7 +110,10 @@ class RaycastSettings:
     interpolation : ``"linear"`` (trilinear, default) or ``"cubic"`` (cubic B-spline
         from 8 linear fetches, Sigg & Hadwiger 2005: smoother, ~8x the texture reads).
     table_scalar_bins, table_thickness_slices : size of the pre-integration table (its
-        top slice is the step; thinner slices serve the partial steps at the ends).
+        top slice is the step; thinner slices serve the shorter pieces). Bins
+        ``"auto"`` (default): 256 or 512 as the transfer function and the data need
+        (:func:`tetvr.raycast_size.auto_bins`); the nodes are aligned on the transfer
+        function's control points where that pays.
     tf_samples : samples of the 1D transfer-function texture used by mip/xray/isosurface.
 
     Examples
@@ -117,7 +123,7 @@ class RaycastSettings:
     """
 
     mode: Literal["emission_absorption", "mip", "xray", "isosurface"] = "emission_absorption"
-    step: float | None = None
+    step: float | Literal["auto"] | None = "auto"
     termination: float = 0.99
     jitter: bool = False
     seed: int = 0
@@ -126,14 +132,18 @@ class RaycastSettings:
     shading: tuple[float, float, float, float] = (0.2, 0.7, 0.3, 32.0)
     clip_box: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     interpolation: Literal["linear", "cubic"] = "linear"
-    table_scalar_bins: int = 256
+    table_scalar_bins: int | Literal["auto"] = "auto"
     table_thickness_slices: int = 8
     tf_samples: int = 1024
 
     def __post_init__(self) -> None:
         if self.mode not in RAYCAST_MODES:
             raise ValueError(f"mode must be one of {RAYCAST_MODES}, got {self.mode!r}")
-        if self.step is not None:
+        if self.step is None or isinstance(self.step, str):
+            if self.step not in (None, "auto"):
+                raise ValueError(f"step must be \"auto\" or a positive number of world units, got {self.step!r}")
+            object.__setattr__(self, "step", "auto")
+        else:
             step = float(self.step)
             if not (math.isfinite(step) and step > 0):
                 raise ValueError(f"step must be a positive number of world units, got {self.step!r}")
@@ -163,16 +173,24 @@ class RaycastSettings:
             raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {self.interpolation!r}")
         for name, lo, hi in (("table_scalar_bins", 2, 4096), ("table_thickness_slices", 1, 64), ("tf_samples", 2, 16384)):
             v = getattr(self, name)
+            if name == "table_scalar_bins" and v == "auto":
+                continue
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not lo <= v <= hi:
-                raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
+                auto = '"auto" or ' if name == "table_scalar_bins" else ""
+                raise ValueError(f"{name} must be {auto}an integer in [{lo}, {hi}], got {v!r}")
             object.__setattr__(self, name, int(v))
         # The ray caster's table has log base 2 (Raycaster.table): 2 ** 63 stays within the span.
-        check_table_size(self.table_scalar_bins, self.table_thickness_slices, 2.0,
+        bins = max(AUTO_BINS) if self.table_scalar_bins == "auto" else self.table_scalar_bins
+        check_table_size(bins, self.table_thickness_slices, 2.0,
                          names=("table_scalar_bins", "table_thickness_slices", "log_base"))
 
-    def step_for(self, volume: Volume) -> float:
-        """The world step used for ``volume``."""
-        return float(self.step) if self.step is not None else 0.5 * float(volume.spacing.min())
+    def step_for(self, volume: Volume, tf: TransferFunction) -> float:
+        """The world step used for ``volume`` and ``tf`` (``tf`` sizes an "auto" step)."""
+        return float(self.step) if self.step != "auto" else auto_step(volume, tf, self.mode)
+
+    def bins_for(self, volume: Volume, tf: TransferFunction) -> int:
+        """The table's scalar bins for ``volume`` and ``tf``."""
+        return int(self.table_scalar_bins) if self.table_scalar_bins != "auto" else auto_bins(volume, tf)
 
     def iso_for(self, volume: Volume) -> float:
         """The isosurface value used for ``volume``."""
@@ -360,7 +378,8 @@ def render_volume_reference(
     if idx.size:
         wpt = rays.world_per_t
         n_piece = np.maximum(np.ceil((rays.t1[idx] - rays.t0[idx]) * wpt[idx] / fine - 1e-9), 1).astype(np.int64)
-        ends = np.cumsum(n_piece + 1)
+        n_cross = _plane_crossings(rays, idx)[1].sum(axis=1)
+        ends = np.cumsum(n_piece + n_cross + 1)
         start = 0
         while start < idx.size:
             base = ends[start - 1] if start else 0
@@ -383,18 +402,51 @@ class _Samples(NamedTuple):
     length: Float  # world length of each piece
 
 
+def _plane_crossings(rays: RayIntervals, rows: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Per ray of ``rows`` and index axis: the first integer strictly past the entry in
+    the ray's direction along that axis, and how many integers lie strictly between the
+    entry and the exit ((n, 3) each)."""
+    o, d = rays.origins_index[rows], rays.directions_index[rows]
+    x0 = o + rays.t0[rows][:, None] * d
+    x1 = o + rays.t1[rows][:, None] * d
+    lo, hi = np.minimum(x0, x1), np.maximum(x0, x1)
+    first = np.floor(lo).astype(np.int64) + 1
+    count = np.maximum(np.ceil(hi).astype(np.int64) - first, 0)
+    return first, count
+
+
 def _march(volume: Volume, tf: TransferFunction, s: RaycastSettings, rays: RayIntervals, rows: NDArray[np.int64],
            n_piece: NDArray[np.int64], wpt: Float) -> Float:
-    """The pixels ``rows``: sample finely, then integrate or reduce as the mode says."""
+    """The pixels ``rows``: sample finely, then integrate or reduce as the mode says.
+
+    The samples are the ``n_piece + 1`` evenly spaced ones and every point where the ray
+    crosses a voxel-index plane, so that every piece lies inside one voxel cell (where
+    the trilinear field is smooth) and a maximum at a voxel the ray passes is sampled.
+    """
     n_rays = rows.shape[0]
-    n_samp = n_piece + 1
-    ray = np.repeat(np.arange(n_rays), n_samp)
-    first = np.cumsum(n_samp) - n_samp
-    k = np.arange(ray.shape[0]) - first[ray]
     t0, t1 = rays.t0[rows], rays.t1[rows]
-    t = t0[ray] + (t1 - t0)[ray] * (k / n_piece[ray])
-    t[first + n_piece] = t1  # the exact exit
     o_idx, d_idx = rays.origins_index[rows], rays.directions_index[rows]
+    ray_even = np.repeat(np.arange(n_rays), n_piece + 1)
+    k = np.arange(ray_even.shape[0]) - np.repeat(np.cumsum(n_piece + 1) - (n_piece + 1), n_piece + 1)
+    t_even = t0[ray_even] + (t1 - t0)[ray_even] * (k / n_piece[ray_even])
+    t_even[np.cumsum(n_piece + 1) - 1] = t1  # the exact exit
+    rays_t, ts = [ray_even], [t_even]
+    plane0, count = _plane_crossings(rays, rows)
+    for a in range(3):
+        r = np.repeat(np.arange(n_rays), count[:, a])
+        if r.size == 0:
+            continue
+        m = np.arange(r.shape[0]) - np.repeat(np.cumsum(count[:, a]) - count[:, a], count[:, a])
+        plane = (plane0[r, a] + m).astype(np.float64)
+        tc = (plane - o_idx[r, a]) / d_idx[r, a]
+        rays_t.append(r)
+        ts.append(np.clip(tc, t0[r], t1[r]))
+    ray, t = np.concatenate(rays_t), np.concatenate(ts)
+    order = np.lexsort((t, ray))
+    ray, t = ray[order], t[order]
+    n_samp = np.bincount(ray, minlength=n_rays)
+    first = np.cumsum(n_samp) - n_samp
+    n_piece = n_samp - 1
     scal = volume.sample_index(o_idx[ray] + t[:, None] * d_idx[ray], interpolation=s.interpolation)
     starts_piece = np.ones(ray.shape[0], dtype=bool)
     starts_piece[first + n_piece] = False  # the last sample of a ray starts no piece

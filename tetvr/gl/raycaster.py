@@ -17,21 +17,22 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._checks import check_instances
 from ..camera import Camera
-from ..preintegrate import PreintegrationTable, table_for, table_scalar_range
+from ..image import _gib, check_memory
+from ..preintegrate import PreintegrationTable, table_build_bytes, table_for, table_scalar_range
 from ..raycast_reference import INTERPOLATIONS, RAYCAST_MODES, RaycastSettings, normalize_ray_limits
 from ..transfer import TransferFunction
 from ..volume import Volume
 from .context import context_alive, create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
-from .util import (Clock, GLOwner, check_size, clear_gl_errors, gl_locked, locked, make_target, set_uniforms,
-                   table_texture)
+from .util import (_LLVMPIPE_TEXTURE_BYTES, _SOFTWARE_GL, Clock, GLOwner, check_size, clear_gl_errors,
+                   free_video_memory, gl_locked, locked, make_target, set_uniforms, table_texture)
 
 __all__ = ["Raycaster", "RaycastStats", "MODES"]
 
@@ -57,18 +58,40 @@ assert tuple(MODES) == RAYCAST_MODES
 _INTERPOLATIONS = {"linear": 0, "cubic": 1}
 assert tuple(_INTERPOLATIONS) == INTERPOLATIONS
 
-# Volume dtype -> (moderngl texture dtype, factor that turns the texel back into the value).
-# Normalized formats keep 8/16-bit data exact at a quarter/half the memory of float32
-# (signed normalized maps the most negative value to -1 like the next one: -32768 reads
-# as -32767). Other dtypes go up as float32.
-_TEXTURE_FORMATS: dict[str, tuple[str, float]] = {
-    "uint8": ("f1", 255.0),
-    "int8": ("ni1", 127.0),
-    "uint16": ("nu2", 65535.0),
-    "int16": ("ni2", 32767.0),
+# Volume dtype -> (moderngl texture dtype, how the stored texels are made from the voxels,
+# factor that turns the texel back into the value). 16-bit data go up as 16-bit normalized,
+# exact at half the memory of float32 (signed normalized maps the most negative value to
+# -1 like the next one: -32768 reads as -32767). 8-bit data are widened to 16 bits: an
+# 8-bit texture is filtered at 8-bit precision (llvmpipe), which held uint8 volumes at
+# ~79 dB from the reference; uint8 v is stored as v * 257 (exact in unorm16: 257 / 65535 =
+# 1 / 255), int8 as float16 (exact). Other dtypes go up as float32.
+_TEXTURE_FORMATS: dict[str, tuple[str, Callable[[NDArray[Any]], NDArray[Any]], float]] = {
+    "uint8": ("nu2", lambda a: a.astype(np.uint16) * np.uint16(257), 255.0),
+    "int8": ("f2", lambda a: a.astype(np.float16), 1.0),
+    "uint16": ("nu2", lambda a: a, 65535.0),
+    "int16": ("ni2", lambda a: a, 32767.0),
 }
+_FLOAT32 = ("f4", lambda a: np.ascontiguousarray(a, dtype=np.float32), 1.0)
+#: Bytes per texel of the moderngl dtypes above.
+_TEXEL_BYTES = {"f1": 1, "ni1": 1, "nu2": 2, "ni2": 2, "f2": 2, "f4": 4}
 
 _BIG = 3.0e38  # "unlimited" ray limits: finite, so no inf reaches the shader
+
+
+def _check_texture(ctx: Any, dims: tuple[int, int, int], texel_bytes: int, what: str) -> None:
+    """``MemoryError`` naming ``what`` if a 3D texture of ``dims`` texels is more than the
+    GL holds: llvmpipe's per-texture limit (its storage has room for the mipmap chain,
+    about 8/7 of the base level), or the free video memory where the driver reports it."""
+    need = texel_bytes * math.prod(dims)
+    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
+    if any(name in renderer for name in _SOFTWARE_GL):
+        if need * 8 // 7 > _LLVMPIPE_TEXTURE_BYTES:
+            raise MemoryError(f"{what} is a {_gib(need)} texture; {ctx.info.get('GL_RENDERER')} makes textures of "
+                              f"at most {_gib(_LLVMPIPE_TEXTURE_BYTES * 7 // 8)}")
+        return
+    free = free_video_memory(ctx)
+    if free is not None and need > free:
+        raise MemoryError(f"{what} is a {_gib(need)} texture; the GPU reports {_gib(free)} free")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -199,15 +222,14 @@ class Raycaster(GLOwner):
         import moderngl
 
         gpu = volume.fit_size(self.max_texture_size)
+        dtype, widen, scale = _TEXTURE_FORMATS.get(gpu.data.dtype.name, _FLOAT32)
+        _check_texture(self.ctx, gpu.dims, _TEXEL_BYTES[dtype], f"a volume of {gpu.dims} voxels ({dtype})")
+        check_memory(2 * _TEXEL_BYTES[dtype] * math.prod(gpu.dims), f"uploading a volume of {gpu.dims} voxels")
+        payload = widen(gpu.data)
         if self._volume_tex is not None:
             self._volume_tex.release()
-        fmt = _TEXTURE_FORMATS.get(gpu.data.dtype.name)
-        if fmt is None:
-            dtype, scale = "f4", 1.0
-            payload = np.ascontiguousarray(gpu.data, dtype=np.float32)
-        else:
-            dtype, scale = fmt
-            payload = gpu.data
+            self._volume_tex = None
+            self._volume = self._gpu_volume = None
         tex = self.ctx.texture3d(gpu.dims, 1, payload.tobytes(), dtype=dtype)
         tex.repeat_x = tex.repeat_y = tex.repeat_z = False
         tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
@@ -224,8 +246,25 @@ class Raycaster(GLOwner):
         entry; the partial steps where a ray enters and leaves read thinner slices.
         """
         s = settings or self.settings
-        return table_for(tf, volume.scalar_range, s.step_for(volume), n_bins=s.table_scalar_bins,
-                         n_slices=s.table_thickness_slices, log_base=2.0, encoding="normalized", dtype="float32")
+        n_bins = s.bins_for(volume, tf)
+        self._check_table(n_bins, s.table_thickness_slices)
+        return table_for(tf, volume.scalar_range, s.step_for(volume, tf), n_bins=n_bins,
+                         n_slices=s.table_thickness_slices, log_base=2.0, encoding="normalized", dtype="float32",
+                         align_nodes=True)
+
+    def _check_table(self, n_bins: int, n_slices: int) -> None:
+        """Refuse a table this GL cannot hold, or this machine cannot build, before any
+        of it is allocated (``ValueError`` / ``MemoryError`` naming the settings)."""
+        names = f"table_scalar_bins={n_bins} with table_thickness_slices={n_slices}"
+        gl_max = int(self.ctx.info.get("GL_MAX_3D_TEXTURE_SIZE", 2048))
+        if n_bins > gl_max:
+            raise ValueError(f"table_scalar_bins={n_bins} is more than this GL's largest 3D texture side "
+                             f"(GL_MAX_3D_TEXTURE_SIZE {gl_max}), which the table's scalar axes must fit; "
+                             f"use at most {gl_max} bins")
+        dims = (n_slices + 1, n_bins, n_bins)
+        _check_texture(self.ctx, dims, 16, f"the pre-integration table of {names}")
+        check_memory(table_build_bytes(n_bins, n_slices) + 16 * math.prod(dims),
+                     f"building the pre-integration table of {names} ({n_bins} x {n_bins} x {n_slices + 1})")
 
     def _use_table(self, table: PreintegrationTable) -> None:
         if table is self._table:
@@ -330,19 +369,22 @@ class Raycaster(GLOwner):
         use_limits = self._use_limits(t_start, t_end, (width, height))
         clock.lap("upload")
         mode = MODES[s.mode]
-        # Ranges come from the original volume: downsampling only narrows them. The
-        # table spans the same scalar range (its u_scalar_range equals this one).
+        # Ranges come from the original volume: downsampling only narrows them. A table
+        # may span more (its nodes aligned on the transfer function's control points):
+        # the 1D transfer function then spans the same range, since both read u_scalar_range.
         scalar_range = table_scalar_range(volume.scalar_range, tf)
         table_uniforms: dict[str, Any] = {}
         if mode.uses_table:
             table = self.table(volume, tf, s)
             self._use_table(table)
             table_uniforms = table.gl_uniforms()
+            scalar_range = table.scalar_range
         self._use_tf(tf, scalar_range, s.tf_samples)
         clock.lap("table")
 
-        step = s.step_for(volume)
-        max_steps = int(math.ceil(gpu.diagonal / step)) + 3
+        step = s.step_for(volume, tf)
+        # Regular steps, plus one sample per voxel-index plane the ray crosses (raycast.frag).
+        max_steps = int(math.ceil(gpu.diagonal / step)) + sum(gpu.dims) + 3
         if max_steps > 1 << 20:
             raise ValueError(f"step {step} is too small for a volume of diagonal {gpu.diagonal:.4g}: "
                              f"{max_steps} steps per ray")
