@@ -5,6 +5,8 @@
 // a trilinear fetch then reads nearby memory; tetvr.gl.util.table_texture), linear
 // filtering (TABLE_CUBIC 1: Catmull-Rom across slices instead). TABLE_NORMALIZED 1: RGB = colour per unit alpha, A = mean extinction, so
 // alpha = 1 - exp(-d A) is exact in d; 0: premultiplied RGBA (Kraus et al. 2004).
+// TABLE_WARP 1: the scalar nodes are uneven (tetvr.tablewarp): table_st gives x, the cells
+// from the first node, and u_warp (u_warp_cells x 1, RGBA32F, no filtering) the node index.
 // Returns premultiplied RGBA.
 
 // The per-fragment arithmetic is reduced to multiply-adds by constants that
@@ -17,8 +19,22 @@ uniform vec3 u_table_size;     // (N, N, K + 1): front scalar, back scalar, slic
 uniform vec2 u_lookup;         // scalar -> texel coordinate: scale, offset (table_st)
 uniform vec4 u_slices;         // x = d / d_min -> texture z: 1 / d_min, then for x < 1: z = x * y + z,
 uniform float u_slices_log;    // else z = log2(x) * u_slices.w + u_slices_log
+#if defined(TABLE_WARP) && TABLE_WARP
+uniform sampler2D u_warp;      // per cell: (split x, node index there, nodes per cell below, above)
+uniform int u_warp_cells;
 
-// Texture coordinates of a (front, back) scalar pair: node i sits at texel centre
+// Table texture coordinates of the scalars at x cells from the first node: a cell holds at
+// most one node, so the node index is linear on each side of the cell's split, exactly.
+vec2 warp_st(vec2 x) {
+    ivec2 c = clamp(ivec2(floor(x)), 0, u_warp_cells - 1);
+    vec4 a = texelFetch(u_warp, ivec2(c.x, 0), 0);
+    vec4 b = texelFetch(u_warp, ivec2(c.y, 0), 0);
+    vec2 index = vec2(a.y, b.y) + (x - vec2(a.x, b.x)) * mix(vec2(a.w, b.w), vec2(a.z, b.z), lessThan(x, vec2(a.x, b.x)));
+    return (clamp(index, 0.0, u_table_size.x - 1.0) + 0.5) / u_table_size.x;
+}
+#endif
+
+// Texture coordinates of a (front, back) scalar pair (with TABLE_WARP: cells, see warp_st): node i sits at texel centre
 // (i + 0.5) / N. No clamp is needed: the texture clamps to its edge texels, and those are
 // the first and last nodes, which is what a scalar beyond the table's range should read.
 // Affine in the scalars, so tet.vert applies it per vertex (one multiply-add less per
@@ -29,6 +45,9 @@ vec2 table_st(vec2 s) {
 
 // The segment with texture coordinates st (table_st) and world length d.
 vec4 lookup_table(vec2 st, float d) {
+#if defined(TABLE_WARP) && TABLE_WARP
+    st = warp_st(st);
+#endif
     // Slice 0 is zero thickness, slice k >= 1 is d_min * base^(k - 1), linear below d_min;
     // z is the texture coordinate of the fractional slice, (slice + 0.5) / (K + 1). Beyond
     // the thickest slice (z > (K + 0.5) / (K + 1)) the texture clamps to that slice.

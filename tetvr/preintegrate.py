@@ -50,6 +50,7 @@ from numpy.typing import NDArray
 
 from .image import check_memory
 from .optics import MAX_OPACITY, OPTICS, mean_neg_log
+from .tablewarp import WARP_CELLS, warp_cells, warped_nodes
 from .transfer import TransferFunction
 
 __all__ = ["PreintegrationTable", "build_table", "table_for", "table_scalar_range", "aligned_scalar_range",
@@ -65,6 +66,8 @@ _MAX_STORED_TAU = 1e30
 #: working arrays of the run recurrence and of the encoding. Measured with tracemalloc at
 #: 128-512 bins and 8-32 slices: 107-127 bytes.
 TABLE_BUILD_BYTES_PER_ENTRY = 128
+#: ... and of a warped table (``warp=True``), whose runs are composited all at once.
+TABLE_BUILD_BYTES_PER_ENTRY_WARPED = 256
 #: The largest table build allowed, whatever memory the machine has: 8 GiB, ~67M entries
 #: (1024 x 1024 x 64; the benchmark sweep's largest, 1024 x 1024 x 49, takes 6.1 GiB and
 #: ~5 s), whose float32 texture is 1 GiB. 2048 bins x 256 slices would need 138 GiB.
@@ -81,22 +84,23 @@ MAX_THICKNESS_SPAN = 1e24
 MIN_UNIT_DISTANCE = 1e-300
 
 
-def table_build_bytes(n_bins: int, n_slices: int) -> int:
+def table_build_bytes(n_bins: int, n_slices: int, *, warp: bool = False) -> int:
     """Peak memory of :func:`build_table` for ``n_bins`` x ``n_bins`` x ``n_slices + 1``
     entries, in bytes (an upper bound of what was measured).
 
     >>> table_build_bytes(256, 16) / 2**20
     136.0
     """
-    return TABLE_BUILD_BYTES_PER_ENTRY * int(n_bins) ** 2 * (int(n_slices) + 1)
+    per_entry = TABLE_BUILD_BYTES_PER_ENTRY_WARPED if warp else TABLE_BUILD_BYTES_PER_ENTRY
+    return per_entry * int(n_bins) ** 2 * (int(n_slices) + 1)
 
 
-def check_table_size(n_bins: int, n_slices: int, log_base: float | None = None, *,
+def check_table_size(n_bins: int, n_slices: int, log_base: float | None = None, *, warp: bool = False,
                      names: tuple[str, str, str] = ("n_bins", "n_slices", "log_base")) -> None:
     """Refuse a table too big to build (:data:`MAX_TABLE_BUILD_BYTES`) or whose
     thickness axis spans more than :data:`MAX_THICKNESS_SPAN`, with a ``ValueError`` naming
     the sizes (``names``: how the caller calls the three arguments)."""
-    need = table_build_bytes(n_bins, n_slices)
+    need = table_build_bytes(n_bins, n_slices, warp=warp)
     if need > MAX_TABLE_BUILD_BYTES:
         raise ValueError(
             f"{names[0]}={n_bins} with {names[1]}={n_slices} is a {n_bins} x {n_bins} x {n_slices + 1} table "
@@ -138,6 +142,8 @@ class PreintegrationTable:
     encoding : "normalized" or "premultiplied".
     alpha_scale : for "normalized", the factor that turns the stored A into extinction
         (1 for float32; max extinction for uint8, whose A is stored divided by it).
+    nodes : (N,) scalars of the nodes of a warped table (:mod:`tetvr.tablewarp`), or
+        None where they are evenly spaced over ``scalar_range``.
     """
 
     data: NDArray[np.generic]
@@ -146,6 +152,7 @@ class PreintegrationTable:
     log_base: float
     encoding: str
     alpha_scale: float = 1.0
+    nodes: NDArray[np.float64] | None = None
 
     @property
     def n_bins(self) -> int:
@@ -153,8 +160,22 @@ class PreintegrationTable:
 
     @property
     def node_spacing(self) -> float:
-        """Scalar distance between adjacent nodes of the scalar axes."""
+        """Scalar distance between adjacent nodes of the scalar axes (the widest, if warped)."""
+        if self.nodes is not None:
+            return float(np.diff(self.nodes).max())
         return (self.scalar_range[1] - self.scalar_range[0]) / (self.n_bins - 1)
+
+    def node_coordinate(self, scalars: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Fractional node index of scalars, clamped to the table (the GPU does the same)."""
+        lo, hi = self.scalar_range
+        s = np.asarray(scalars, dtype=np.float64)
+        if self.nodes is not None:
+            return np.interp(s, self.nodes, np.arange(self.n_bins, dtype=np.float64))
+        return np.clip((s - lo) / (hi - lo), 0, 1) * (self.n_bins - 1)
+
+    def warp_texels(self) -> NDArray[np.float32] | None:
+        """The warp texture of a warped table (:func:`tetvr.tablewarp.warp_cells`), else None."""
+        return None if self.nodes is None else warp_cells(self.nodes)
 
     @property
     def n_slices(self) -> int:
@@ -173,12 +194,15 @@ class PreintegrationTable:
         """The uniforms ``shaders/lookup.glsl`` reads this table with (texture unit 0)."""
         lo, hi = self.scalar_range
         n = self.n_bins
-        scale = (n - 1) / ((hi - lo) * n)
+        # Even nodes: node i at texel centre (i + 0.5) / N. Warped: x = cells from the first
+        # node, which the warp texture (unit 8) turns into the fractional node index.
+        scale = WARP_CELLS / (hi - lo) if self.nodes is not None else (n - 1) / ((hi - lo) * n)
+        offset = -lo * scale if self.nodes is not None else 0.5 / n - lo * scale
         k1 = self.n_slices + 1
         return dict(
             u_table=0, u_scalar_range=(lo, hi), u_optical_scale=self.alpha_scale / math.log(2.0),
-            u_table_size=(n, n, k1),
-            u_lookup=(scale, 0.5 / n - lo * scale),
+            u_table_size=(n, n, k1), u_warp=8, u_warp_cells=WARP_CELLS,
+            u_lookup=(scale, offset),
             # Texture z of the fractional slice s is (s + 0.5) / (K + 1); s = x below
             # x = d / d_min = 1, s = 1 + log2(x) / log2(base) above (the texture clamps it to K).
             u_slices=(1.0 / self.d_min, 1.0 / k1, 0.5 / k1, 1.0 / (math.log2(self.log_base) * k1)),
@@ -199,10 +223,9 @@ class PreintegrationTable:
         A CPU model of the shader's lookup, used in tests to separate table error from
         rasterisation error.
         """
-        lo, hi = self.scalar_range
         n = self.n_bins
-        fi = np.clip((np.asarray(sf) - lo) / (hi - lo), 0, 1) * (n - 1)
-        fj = np.clip((np.asarray(sb) - lo) / (hi - lo), 0, 1) * (n - 1)
+        fi = self.node_coordinate(sf)
+        fj = self.node_coordinate(sb)
         fk = self.slice_coordinate(thickness)
         data = self.data.astype(np.float64)
         if self.data.dtype == np.uint8:
@@ -333,20 +356,23 @@ def table_for(
     dtype: str = "float32",
     optics: str = "exact",
     align_nodes: bool = False,
+    warp: bool = False,
 ) -> PreintegrationTable:
     """The table for a transfer function and a mesh, from a cache keyed by all inputs.
 
     The scalar axis spans :func:`table_scalar_range`: the union of the data range and
     the transfer function's domain; with ``align_nodes`` its nodes are placed on the
-    transfer function's control points where that helps (:func:`aligned_scalar_range`).
+    transfer function's control points where that helps (:func:`aligned_scalar_range`);
+    with ``warp`` they are placed where the transfer function varies instead
+    (:mod:`tetvr.tablewarp`; ``align_nodes`` does not apply).
     """
     # Thicknesses are rounded up to 7 significant digits so near-equal meshes share a table.
     d_top = float(f"{d_max * (1 + 1e-6):.7g}")
     rng = table_scalar_range(data_range, tf)
-    if align_nodes:
+    if align_nodes and not warp:
         rng = aligned_scalar_range(rng, tf, n_bins)
     return _cached(tf, rng, d_top, n_bins=n_bins, n_slices=n_slices,
-                   log_base=float(log_base), encoding=encoding, dtype=dtype, optics=optics)
+                   log_base=float(log_base), encoding=encoding, dtype=dtype, optics=optics, warp=bool(warp))
 
 
 def build_table(
@@ -360,6 +386,7 @@ def build_table(
     encoding: str = "normalized",
     dtype: str = "float32",
     optics: str = "exact",
+    warp: bool = False,
 ) -> PreintegrationTable:
     """Build a pre-integration table (no cache; see :func:`table_for`).
 
@@ -375,6 +402,9 @@ def build_table(
     optics : "exact" (``tau = -ln(1 - a)/u``), "linear" (``tau = a/u``, VTK's unstructured
         mappers) or "vtk" (``tau = a/u`` and the mean of the end colours, unattenuated: the
         fragment formula of VTK's projected tetrahedra); see :data:`tetvr.optics.OPTICS`.
+    warp : place the ``n_bins`` nodes where the transfer function varies, every control
+        point on a node (:func:`tetvr.tablewarp.warped_nodes`), instead of evenly; the
+        table's ``nodes`` then says where they are.
 
     Examples
     --------
@@ -397,11 +427,14 @@ def build_table(
         raise ValueError(f"encoding must be 'normalized' or 'premultiplied', got {encoding!r}")
     if dtype not in ("float32", "uint8"):
         raise ValueError(f"dtype must be 'float32' or 'uint8', got {dtype!r}")
-    check_table_size(n_bins, n_slices, log_base)
+    check_table_size(n_bins, n_slices, log_base, warp=warp)
     u = check_unit_distance(tf.unit_distance, "the transfer function's unit_distance")
-    check_memory(table_build_bytes(n_bins, n_slices),
+    warped = warped_nodes(tf, (lo, hi), n_bins) if warp else None
+    nodes = warped if warped is not None else np.linspace(lo, hi, n_bins)
+    n_bins = nodes.size  # a warped table may hold a few more (control points)
+    check_memory(table_build_bytes(n_bins, n_slices, warp=warp),
                  f"building a {n_bins} x {n_bins} x {n_slices + 1} pre-integration table")
-    nodes = np.linspace(lo, hi, n_bins)
+    width = np.diff(nodes) * ((n_bins - 1) / (hi - lo)) if warped is not None else np.ones(n_bins - 1)
     color, opacity = tf.evaluate(nodes)
     if optics not in OPTICS:
         raise ValueError(f"optics must be one of {OPTICS}, got {optics!r}")
@@ -423,11 +456,14 @@ def build_table(
     rgb = np.zeros((n_slices, n_bins, n_bins, 3))
     theta = np.zeros((n_slices, n_bins, n_bins))
     # Optical depth is exact from the prefix sum of the bin means (Engel 2001).
-    prefix = np.concatenate([[0.0], np.cumsum(tau_bin)])  # sum of tau over bins < i
+    # Scalars in units of the first bin's width (all bins' when the nodes are even).
+    prefix = np.concatenate([[0.0], np.cumsum(tau_bin * width)])  # optical depth over bins < i
     i_idx = np.arange(n_bins)
-    span = np.abs(i_idx[None, :] - i_idx[:, None])  # [sb, sf]
+    pos = np.concatenate([[0.0], np.cumsum(width)])
+    span = np.abs(pos[None, :] - pos[:, None]) if warped is not None else np.abs(i_idx[None, :] - i_idx[:, None])
     # [sb, sf], symmetric: the mean over the bins between, or the node's own on the diagonal.
-    mean_tau = np.where(span > 0, np.abs(prefix[None, :] - prefix[:, None]) / np.maximum(span, 1), tau_node[None, :])
+    mean_tau = np.where(span > 0, np.abs(prefix[None, :] - prefix[:, None]) / np.where(span > 0, span, 1),
+                        tau_node[None, :])
     if optics == "vtk":  # VTK's PT: the mean of the two ends, not of the segment
         mean_tau = 0.5 * (tau_node[None, :] + tau_node[:, None])
         mean_color = 0.5 * (color[None, :, :] + color[:, None, :])  # [sb, sf, 3]
@@ -439,7 +475,10 @@ def build_table(
         # Diagonal: constant scalar, closed form.
         rgb[:, i_idx, i_idx, :] = color[None] * (-np.expm1(-thick[:, None] * tau_node[None]))[..., None]
         # Off-diagonal: the incremental recurrence, forwards (sb > sf) and on the mirrored axis.
-        _fill_runs(rgb, color, tau_bin, thick)
+        if warped is None:
+            _fill_runs(rgb, color, tau_bin, thick)
+        else:
+            _fill_runs_uneven(rgb, color, tau_bin, width, thick)
     alpha = -np.expm1(-theta)
 
     table = np.zeros((n_slices + 1, n_bins, n_bins, 4))
@@ -452,7 +491,7 @@ def build_table(
             chroma = np.where(alpha[..., None] > 1e-300, rgb / alpha[..., None], 0.0)
         table[1:, ..., :3] = np.clip(chroma, 0.0, 1.0).transpose(0, 2, 1, 3)
         table[:, ..., 3] = np.minimum(mean_tau, _MAX_STORED_TAU)[None]
-        table[0, ..., :3] = mean_color if optics == "vtk" else _thin_limit(color, tau_bin, tau_node, prefix)
+        table[0, ..., :3] = mean_color if optics == "vtk" else _thin_limit(color, tau_bin * width, tau_node, prefix)
         if dtype == "uint8":
             alpha_scale = float(max(min(mean_tau.max(), _MAX_STORED_TAU), 1e-300))
             table[..., 3] /= alpha_scale
@@ -462,8 +501,10 @@ def build_table(
         data = table.astype(np.float32)
     data.setflags(write=False)
     thicknesses = np.concatenate([[0.0], thick])
+    if warped is not None:
+        warped.setflags(write=False)
     return PreintegrationTable(data=data, scalar_range=(lo, hi), thicknesses=thicknesses,
-                               log_base=float(log_base), encoding=encoding, alpha_scale=alpha_scale)
+                               log_base=float(log_base), encoding=encoding, alpha_scale=alpha_scale, nodes=warped)
 
 
 # table_for's cache (called with keywords, so every call shares one key layout).
@@ -533,6 +574,52 @@ def _fill_runs(rgb: NDArray[np.float64], color: NDArray[np.float64], tau_bin: ND
             else:
                 f = nb - i  # the front node on the unmirrored axis; sb runs f-1 .. 0
                 np.maximum(w_out[:, :f], 0.0, out=rgb[:, f, f - 1::-1, :])
+
+
+def _fill_runs_uneven(rgb: NDArray[np.float64], color: NDArray[np.float64], tau_bin: NDArray[np.float64],
+                      width: NDArray[np.float64], thick: NDArray[np.floating[Any]]) -> None:
+    """:func:`_fill_runs` for nodes ``width`` apart (bin by bin, in any unit): ``rgb[k, sf, sb]``.
+
+    A run from node i to node j crosses bin m in length ``thick[k] * width[m] / (x_j - x_i)``,
+    which differs from run to run, so no two runs share their bins' colours and the sliding
+    window of the even table does not apply: every run is composited front to back, bin by
+    bin, all runs at once (those still running at step s are a prefix, longest first). The
+    work is ~N^3 K / 3 bin steps instead of N^2 K, which is why warped tables have fewer nodes.
+    """
+    n_bins = color.shape[0]
+    nb = n_bins - 1
+    # Runs (front i, length n), longest first: the runs still going at step s are the first ones.
+    lengths = np.repeat(np.arange(nb, 0, -1), np.arange(1, nb + 1))
+    fronts = np.concatenate([np.arange(nb - n + 1) for n in range(nb, 0, -1)])
+    going = np.cumsum(np.arange(1, nb + 1))  # runs longer than s, for s = 0 .. nb - 1
+    going = going[::-1]
+    for forwards in (True, False):
+        if forwards:
+            c0, c1, w, taus = color[:-1], color[1:], width, tau_bin
+        else:  # mirrored axis: node N-1-i, bins in reverse with their colours swapped
+            c0, c1, w, taus = color[:0:-1], color[-2::-1], width[::-1], tau_bin[::-1]
+        x = np.concatenate([[0.0], np.cumsum(w)])
+        per_width = thick[None, :] / (x[fronts + lengths] - x[fronts])[:, None]  # [run, k]: length per unit width
+        tw = taus * w
+        dc = c1 - c0
+        acc = np.zeros((fronts.size, thick.shape[0], 3))
+        trans = np.ones((fronts.size, thick.shape[0]))
+        for step in range(nb):
+            c = going[step]
+            m = fronts[:c] + step
+            th = per_width[:c] * tw[m][:, None]
+            t = np.exp(-th)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                phi = np.where(th > 1e-12, -np.expm1(-th) / np.where(th > 0, th, 1.0), 1.0 - 0.5 * th)
+            e = c0[m][:, None, :] - c1[m][:, None, :] * t[..., None] + dc[m][:, None, :] * phi[..., None]
+            e *= (th > 0)[..., None]  # a transparent bin emits nothing (guards rounding)
+            acc[:c] += trans[:c, :, None] * e
+            trans[:c] *= t
+        np.maximum(acc, 0.0, out=acc)
+        front, back = fronts, fronts + lengths
+        if not forwards:
+            front, back = nb - front, nb - back
+        rgb[:, front, back, :] = acc.transpose(1, 0, 2)
 
 
 def _thin_limit(color: NDArray[np.float64], tau_bin: NDArray[np.float64], tau_node: NDArray[np.float64],

@@ -12,13 +12,15 @@ from .optics import OPTICS
 from .preintegrate import check_table_size
 from .tablesize import AUTO_BINS, DEFAULT_TOLERANCE
 
-__all__ = ["RenderSettings", "SORT_METHODS", "TABLE_ENCODINGS", "TABLE_DTYPES"]
+__all__ = ["RenderSettings", "SORT_METHODS", "TABLE_ENCODINGS", "TABLE_DTYPES", "TABLE_WARPS"]
 
 #: Visibility orderings (see :mod:`tetvr.sort`).
 SORT_METHODS = ("auto", "centroid", "mpvo", "mpvonc", "xmpvo", "none")
 #: How the pre-integration table is stored and looked up (see :mod:`tetvr.preintegrate`).
 TABLE_ENCODINGS = ("normalized", "premultiplied")
 TABLE_DTYPES = ("float32", "uint8")
+#: Whether the table's scalar nodes are warped to the transfer function (see tetvr.tablewarp).
+TABLE_WARPS = ("auto", "on", "off")
 #: Interpolation of the table along its thickness axis.
 TABLE_FILTERS = ("linear", "cubic")
 #: Storage of the compositing target.
@@ -66,6 +68,12 @@ class RenderSettings:
         evenly over the range (``False``, the former behaviour): a control point between
         nodes is cut off by the table's linear ramp between them. Even nodes are kept
         where a ramp spans fewer than ten of them (there placement is a lottery).
+    table_warp : ``"auto"`` (default), ``"on"`` or ``"off"``: a *warped* table, whose scalar
+        nodes are dense where the transfer function varies and lie on its control points
+        (:mod:`tetvr.tablewarp`), instead of evenly spaced ones. ``"auto"`` takes one where
+        the scene's estimated error (:mod:`tetvr.tablesize`) says even nodes fall short:
+        isosurface-like transfer functions, whose narrow spikes fall between even nodes.
+        Both GPU methods read it through a small node-index texture.
     table_dtype : ``"float32"`` or ``"uint8"`` storage of the table.
     table_encoding : ``"normalized"`` stores colour/alpha and optical depth per unit
         length, so that alpha is exact in the thickness and only the (slowly varying)
@@ -107,6 +115,7 @@ class RenderSettings:
     table_log_base: float = 1.6
     table_tolerance: float = DEFAULT_TOLERANCE
     table_align_nodes: bool = True
+    table_warp: Literal["auto", "on", "off"] = "auto"
     table_dtype: Literal["float32", "uint8"] = "float32"
     table_encoding: Literal["normalized", "premultiplied"] = "normalized"
     table_filter: Literal["linear", "cubic"] = "linear"
@@ -129,6 +138,8 @@ class RenderSettings:
             raise ValueError(f"framebuffer must be one of {FRAMEBUFFERS}, got {self.framebuffer!r}")
         if self.optics not in OPTICS:
             raise ValueError(f"optics must be one of {OPTICS}, got {self.optics!r}")
+        if self.table_warp not in TABLE_WARPS:
+            raise ValueError(f"table_warp must be one of {TABLE_WARPS}, got {self.table_warp!r}")
         if self.table_dtype not in TABLE_DTYPES:
             raise ValueError(f"table_dtype must be one of {TABLE_DTYPES}, got {self.table_dtype!r}")
         for name, lo, hi in (("table_scalar_bins", 2, 2048), ("table_thickness_slices", 1, 256)):

@@ -317,7 +317,7 @@ class Renderer(GLOwner):
         size = resolve_table_size(s, tf, mesh)
         table = table_for(tf, mesh.scalar_range, mesh.max_edge, n_bins=size.n_bins, n_slices=size.n_slices,
                           log_base=size.log_base, encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics,
-                          align_nodes=s.table_align_nodes)
+                          align_nodes=s.table_align_nodes, warp=size.warp)
         self._table_cache = (key, table)
         return table
 
@@ -484,7 +484,7 @@ class Renderer(GLOwner):
         self._clock.lap("sort")
 
         defines = dict(PERSPECTIVE_CORRECT=int(self.settings.perspective_correct),
-                       TABLE_NORMALIZED=int(table.encoding == "normalized"),
+                       TABLE_NORMALIZED=int(table.encoding == "normalized"), TABLE_WARP=int(table.nodes is not None),
                        TABLE_CUBIC=int(self.settings.table_filter == "cubic"))
         if shader == "tet":
             before_near, beyond_far = _outside_clipping_range(mesh, camera)
@@ -541,7 +541,7 @@ class Renderer(GLOwner):
                   ) -> NDArray[np.float32]:
         """One frame by tet marching (:mod:`tetvr.gl.raymarch`), with this renderer's table."""
         uniforms = self._march_uniforms(mesh, camera, size)
-        defines = dict(TABLE_NORMALIZED=int(table.encoding == "normalized"),
+        defines = dict(TABLE_NORMALIZED=int(table.encoding == "normalized"), TABLE_WARP=int(table.nodes is not None),
                        TABLE_CUBIC=int(self.settings.table_filter == "cubic"))
         self._table_tex.use(0)
         image = self._march.render(mesh, camera, size, uniforms, table.gl_uniforms(), defines, self._clock)

@@ -273,7 +273,34 @@ def table_texture(ctx: Any, table: "PreintegrationTable") -> Any:
     tex = ctx.texture3d((k1, n, n), 4, texels.tobytes(), dtype=dtype)
     tex.repeat_x = tex.repeat_y = tex.repeat_z = False
     tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-    return tex
+    warp = table.warp_texels()
+    if warp is None:
+        return tex
+    # A warped table's node index per scalar cell (lookup.glsl's u_warp), read unfiltered.
+    warp_tex = ctx.texture((warp.shape[0], 1), 4, warp.tobytes(), dtype="f4")
+    warp_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    return WarpedTableTexture(tex, warp_tex)
+
+
+class WarpedTableTexture:
+    """The textures of a warped table (:mod:`tetvr.tablewarp`), used and released as one:
+    ``use(unit)`` binds the table there and the warp at :data:`WARP_UNIT` (``u_warp``)."""
+
+    def __init__(self, table: Any, warp: Any) -> None:
+        self.table, self.warp = table, warp
+
+    def use(self, location: int = 0) -> None:
+        self.table.use(location)
+        self.warp.use(WARP_UNIT)
+
+    def release(self) -> None:
+        self.table.release()
+        self.warp.release()
+
+
+#: The texture unit of a warped table's warp (``PreintegrationTable.gl_uniforms``' u_warp;
+#: the ray caster's own textures take units 1-7).
+WARP_UNIT = 8
 
 
 def set_uniforms(prog: Any, **uniforms: Any) -> None:
