@@ -16,7 +16,7 @@ import pytest
 
 import tetvr
 from tetvr import Camera, synthetic
-from tetvr.annotate import Picture, annotate, as_mesh, plot
+from tetvr.annotate import Picture, annotate, as_mesh, panels, plot, show
 from tetvr.cli import EXIT_USAGE, main
 from tetvr.image import composite_over, to_rgba8
 from tetvr.render import default_transfer_function
@@ -82,6 +82,36 @@ def test_annotate_checks_its_arguments(scene):
         annotate(image[..., :3], tf)
     with pytest.raises(TypeError, match="tf must be a TransferFunction"):
         annotate(image, {"color": []})
+
+
+def _ink_rows(rgba: np.ndarray, background=(255, 255, 255)) -> np.ndarray:
+    """Rows of a decoded picture holding anything but the background."""
+    return np.flatnonzero(np.any(rgba[..., :3] != np.asarray(background, dtype=np.uint8), axis=(1, 2)))
+
+
+def test_panels_put_each_title_above_its_picture(scene):
+    _, _, _, image = scene
+    solid = np.zeros((40, 60, 4), np.float32)
+    solid[..., 0] = solid[..., 3] = 1.0  # opaque red: where the picture is
+    titled = decode(panels([solid, image], ["a red square", "the cube"], cols=2))
+    plain = decode(panels([solid, image], cols=2))
+    assert titled.shape[0] > plain.shape[0]  # the titles take their own rows
+    red = np.all(titled[..., :3] == (255, 0, 0), axis=-1)
+    top_of_red = np.flatnonzero(red.any(axis=1))[0]
+    ink = _ink_rows(titled[:top_of_red])  # the title: dark text above the red square
+    assert len(ink) > 3 and (titled[ink][..., :3].min() < 80)
+    with pytest.raises(ValueError, match="2 images but 1 titles"):
+        panels([solid, image], ["one"])
+
+
+def test_show_returns_a_picture_jupyter_displays(scene):
+    _, _, _, image = scene
+    one = show(image, "the cube")
+    assert isinstance(one, Picture) and one._repr_png_().startswith(PNG)
+    assert one.image is not None and np.array_equal(one.image, image)
+    two = show([image, image], ["left", "right"], background=(0, 0, 0))
+    assert two.image.shape == (90, 120, 4)
+    assert decode(two.png)[0, 0, :3].tolist() == [0, 0, 0]  # the background asked for
 
 
 def test_plot_renders_annotates_and_saves(tmp_path):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import subprocess
 import sys
 import zipfile
@@ -66,6 +67,12 @@ def test_cli_fusion_demo(tmp_path):
     assert main(["fusion-demo", "-o", str(tmp_path), "--size", "64", "48"]) == 0
     for name in ("fusion_interleave", "fusion_overlay", "fusion_cutaway", "fusion_ray_textures", "fusion_modes"):
         assert (tmp_path / f"{name}.png").read_bytes()[:4] == b"\x89PNG"
+    if importlib.util.find_spec("matplotlib") is not None:  # labelled: a title row above each picture
+        import matplotlib.image
+
+        grid = matplotlib.image.imread(tmp_path / "fusion_modes.png")
+        one = matplotlib.image.imread(tmp_path / "fusion_overlay.png")
+        assert one.shape[0] > one.shape[1] * 48 / 64 + 10 and grid.shape[0] > 2 * one.shape[0] - 20
 
 
 def test_image_cells_to_tets_lines_up_with_the_volume():

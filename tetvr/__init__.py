@@ -7,7 +7,7 @@ renderer every image is measured against. Nothing here imports OpenGL until a GP
 renderer is made. :func:`plot` renders and labels a picture in one call (:mod:`~tetvr.annotate`).
 """
 
-from .annotate import Picture, plot
+from .annotate import Picture, plot, show
 from .camera import Camera
 from .image import psnr, rmse, write_png
 from .mesh import MeshReport, TetMesh, read
@@ -41,6 +41,7 @@ __all__ = [
     "demo_scene_path",
     "load_scene",
     "plot",
+    "show",
     "psnr",
     "read",
     "render",

@@ -25,10 +25,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .camera import Camera
-from .image import atomic_output, composite_over, to_rgba8
+from .image import DEFAULT_BACKGROUND, atomic_output, composite_over, to_rgba8
 from .transfer import TransferFunction
 
-__all__ = ["Picture", "annotate", "plot", "as_mesh"]
+__all__ = ["Picture", "annotate", "panels", "plot", "show", "as_mesh"]
 
 _AXIS_COLOURS = ("#d62728", "#2ca02c", "#1f77b4")  # x, y, z: red, green, blue as ParaView and VTK draw them
 
@@ -120,7 +120,7 @@ def annotate(
     legend: bool = True,
     triad: bool = True,
     outline: bool = True,
-    background: Sequence[float] | None = (1.0, 1.0, 1.0),
+    background: Sequence[float] | None = DEFAULT_BACKGROUND,
 ) -> bytes:
     """The annotated PNG of a rendered image, as bytes.
 
@@ -305,6 +305,96 @@ def _draw_legend(fig: Any, tf: TransferFunction, layout: tuple[int, int, int, in
         spine.set_linewidth(0.6)
 
 
+# ---- labelled panels: several pictures side by side, each with its title ----
+
+def panels(
+    images: Sequence[ArrayLike],
+    titles: Sequence[str] | None = None,
+    *,
+    background: Sequence[float] | None = DEFAULT_BACKGROUND,
+    cols: int | None = None,
+    suptitle: str | None = None,
+    width_in: float = 2.2,
+    dpi: float = 110.0,
+) -> bytes:
+    """Rendered images in a grid, each under its title, as one PNG (bytes).
+
+    Parameters
+    ----------
+    images : premultiplied float RGBA images, (H, W, 4) each (sizes may differ).
+    titles : one line per image (what it shows; a number such as PSNR where it has one).
+    background : composited under every image.
+    cols : images per row (default: all in one row).
+    suptitle : a line above the grid.
+    width_in, dpi : the width of one panel in inches, and the resolution.
+
+    Examples
+    --------
+    >>> png = panels([img_a, img_b], ["projected tetrahedra", "reference"])  # doctest: +SKIP
+    """
+    _, Figure, FigureCanvasAgg = _matplotlib()
+    imgs = [np.asarray(im) for im in images]
+    if not imgs:
+        raise ValueError("panels needs at least one image")
+    for i, im in enumerate(imgs):
+        if im.ndim != 3 or im.shape[2] != 4:
+            raise ValueError(f"image {i} must have shape (H, W, 4), got {im.shape}")
+    names = list(titles) if titles is not None else [""] * len(imgs)
+    if len(names) != len(imgs):
+        raise ValueError(f"{len(imgs)} images but {len(names)} titles")
+    n = len(imgs)
+    cols = max(1, min(int(cols or n), n))
+    rows = -(-n // cols)
+    aspect = max(im.shape[0] / im.shape[1] for im in imgs)
+    title_in = 0.3 if any(names) else 0.05
+    face = "none" if background is None else tuple(float(v) for v in background)
+    ink = _text_colour(background)
+    fig = Figure(figsize=(width_in * cols, rows * (width_in * aspect + title_in) + (0.35 if suptitle else 0.0)),
+                 dpi=dpi, facecolor=face)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(rows, cols, squeeze=False)
+    for ax in axes.ravel():
+        ax.set_axis_off()
+    for ax, im, name in zip(axes.ravel(), imgs, names):
+        ax.imshow(to_rgba8(composite_over(im, background)), interpolation="nearest")
+        ax.set_title(name, fontsize=8, color=ink)
+    if suptitle:
+        fig.suptitle(suptitle, fontsize=10, color=ink)
+    fig.tight_layout(pad=0.3)
+    out = io.BytesIO()
+    fig.savefig(out, format="png", dpi=dpi, facecolor=face, transparent=background is None)
+    return out.getvalue()
+
+
+def show(images: ArrayLike | Sequence[ArrayLike], titles: str | Sequence[str] | None = None, **kwargs: Any) -> Picture:
+    """One image or several, labelled, as a :class:`Picture` (Jupyter displays it).
+
+    ``images`` is one (H, W, 4) image or a list of them; ``titles`` one line per image;
+    further keywords go to :func:`panels`.
+
+    Examples
+    --------
+    >>> tetvr.show([tetvr.render(mesh), tetvr.render(mesh, method="reference")],
+    ...            ["GPU", "CPU reference"])  # doctest: +SKIP
+    """
+    one = isinstance(images, np.ndarray) and images.ndim == 3
+    imgs = [np.asarray(images)] if one else [np.asarray(im) for im in images]  # type: ignore[union-attr]
+    names = [titles] if isinstance(titles, str) else titles
+    png = panels(imgs, names, **kwargs)
+    return Picture(image=imgs[0] if len(imgs) == 1 else _tiled(imgs), png=png)
+
+
+def _tiled(images: list[NDArray[Any]]) -> NDArray[np.float32]:
+    """Images side by side on one transparent canvas (tops aligned)."""
+    h = max(im.shape[0] for im in images)
+    out = np.zeros((h, sum(im.shape[1] for im in images), 4), dtype=np.float32)
+    x = 0
+    for im in images:
+        out[:im.shape[0], x:x + im.shape[1]] = im
+        x += im.shape[1]
+    return out
+
+
 # ---- the one-liner ----
 
 def as_mesh(obj: Any, scalars: str | None = None, *, component: int | None = None) -> Any:
@@ -334,7 +424,7 @@ def plot(
     *,
     cmap: str = "viridis",
     size: tuple[int, int] = (800, 600),
-    background: Sequence[float] = (1.0, 1.0, 1.0),
+    background: Sequence[float] = DEFAULT_BACKGROUND,
     title: str | None = None,
     units: str | None = None,
     camera: Camera | None = None,

@@ -305,13 +305,34 @@ def _render(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _write_labelled(images: list[Any], titles: list[str], path: Path, *, cols: int | None = None,
+                    suptitle: str | None = None, background: Any = None) -> None:
+    """Pictures with their titles (matplotlib), or, without matplotlib, the plain images
+    side by side and a note saying why they are unlabelled."""
+    from .image import atomic_output, png_bytes
+
+    try:
+        from .annotate import panels
+
+        bg = {} if background is None else {"background": background}
+        data = panels(images, titles, cols=cols, suptitle=suptitle, width_in=max(2.2, images[0].shape[1] / 110), **bg)
+    except ImportError:
+        print(f"tetvr: note: {path.name} is unlabelled: matplotlib is not installed (pip install 'tetvr[plot]')",
+              file=sys.stderr)
+        from .annotate import _tiled
+
+        data = png_bytes(_tiled(images), **({} if background is None else {"background": background}))
+    with atomic_output(path) as f:
+        f.write(data)
+
+
 def _fusion_demo(out: Path, size: tuple[int, int]) -> int:
     from . import FUSION_MODES
     from .examples import bundled, carotid_fusion
     from .fuse import RayTextures, fuse
     from .gl.raycaster import Raycaster
     from .gl.renderer import Renderer
-    from .image import image_size, write_png
+    from .image import image_size
 
     size = image_size(size)
     names = {f"fusion_{mode}.png" for mode in FUSION_MODES} | {"mesh_only.png", "volume_only.png", "fusion_modes.png"}
@@ -324,18 +345,23 @@ def _fusion_demo(out: Path, size: tuple[int, int]) -> int:
     end = np.ones((h, w))
     end[:, : w // 2] = 0.5
     textures = RayTextures(np.zeros((h, w)), end)
+    field, vol_name = "speed", "speed"  # carotid.vtk's 'scalars' are the flow speed
+    titles = {"interleave": "interleave: volume, mesh, volume", "overlay": "overlay: mesh over volume",
+              "cutaway": "cutaway: no volume before mesh", "ray_textures": "ray textures: left half cut"}
+    bg = scene.background
     panels = []
     with Renderer() as r, Raycaster(ctx=r.ctx) as rc:
         for mode in FUSION_MODES:
             img = fuse(scene.mesh, scene.volume, scene.camera, scene.mesh_tf, scene.volume_tf, size=size, mode=mode,
                        renderer=r, raycaster=rc, ray_textures=textures if mode == "ray_textures" else None)
-            write_png(img, out / f"fusion_{mode}.png", background=(0, 0, 0))
+            _write_labelled([img], [titles.get(mode, mode)], out / f"fusion_{mode}.png", background=bg)
             panels.append(img)
-        write_png(r.render(scene.mesh, scene.camera, scene.mesh_tf, size=size), out / "mesh_only.png", background=(0, 0, 0))
-        write_png(rc.render(scene.volume, scene.camera, scene.volume_tf, size=size), out / "volume_only.png",
-                  background=(0, 0, 0))
-    grid = np.concatenate([np.concatenate(panels[:2], axis=1), np.concatenate(panels[2:], axis=1)], axis=0)
-    write_png(grid, out / "fusion_modes.png", background=(0, 0, 0))
+        _write_labelled([r.render(scene.mesh, scene.camera, scene.mesh_tf, size=size)],
+                        [f"mesh only: lumen, {field}"], out / "mesh_only.png", background=bg)
+        _write_labelled([rc.render(scene.volume, scene.camera, scene.volume_tf, size=size)],
+                        [f"volume only: {vol_name}"], out / "volume_only.png", background=bg)
+    _write_labelled(panels, [titles.get(m, m) for m in FUSION_MODES], out / "fusion_modes.png", cols=2, background=bg,
+                    suptitle=f"carotid {field}: {scene.mesh.n_tets} tets in a {'x'.join(map(str, scene.volume.dims))} volume")
     print(f"{scene.mesh.n_tets} tets in a {scene.volume.dims} volume: wrote {', '.join(FUSION_MODES)} "
           f"(fusion_modes.png: {FUSION_MODES[0]}, {FUSION_MODES[1]} / {FUSION_MODES[2]}, {FUSION_MODES[3]}) to {out}")
     return EXIT_OK

@@ -67,6 +67,9 @@ class FusionScene:
     camera: Camera
     volume_tf: TransferFunction
     mesh_tf: TransferFunction
+    #: The scene's own background: its near-white vessels are drawn for black, as a
+    #: radiology viewer shows angiography (other pictures use ``image.DEFAULT_BACKGROUND``).
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 def carotid_fusion(threshold: float = 175.0) -> FusionScene:

@@ -62,7 +62,13 @@ def to_rgba8(image: ArrayLike, background: Sequence[float] | None = None) -> NDA
     return np.round(np.clip(out, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
-def write_png(image: ArrayLike, path: str | os.PathLike[str], *, background: Sequence[float] | None = (1.0, 1.0, 1.0)) -> None:
+#: The background every picture tetvr writes is composited over unless told otherwise
+#: (CLI, scene files, ``tetvr.plot``, the demos, the docs' pictures): white, as in print.
+DEFAULT_BACKGROUND: tuple[float, float, float] = (1.0, 1.0, 1.0)
+
+
+def write_png(image: ArrayLike, path: str | os.PathLike[str], *,
+              background: Sequence[float] | None = DEFAULT_BACKGROUND) -> None:
     """Write a premultiplied float RGBA image (row 0 at the top) as an 8-bit PNG.
 
     ``background`` is composited under the image; ``None`` writes a translucent RGBA PNG.
@@ -74,7 +80,7 @@ def write_png(image: ArrayLike, path: str | os.PathLike[str], *, background: Seq
         f.write(data)
 
 
-def png_bytes(image: ArrayLike, background: Sequence[float] | None = (1.0, 1.0, 1.0), *, level: int = 6) -> bytes:
+def png_bytes(image: ArrayLike, background: Sequence[float] | None = DEFAULT_BACKGROUND, *, level: int = 6) -> bytes:
     """The PNG file of a premultiplied float RGBA image, as bytes (see :func:`write_png`)."""
     img = np.asarray(image)
     if img.ndim != 3 or img.shape[2] != 4:

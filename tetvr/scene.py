@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from .camera import Camera, reset_clipping_range
-from .image import atomic_output, image_size
+from .image import DEFAULT_BACKGROUND, atomic_output, image_size
 from .mesh import TetMesh, read
 from .preintegrate import check_unit_distance
 from .render import default_transfer_function
@@ -62,7 +62,7 @@ class Scene:
     tf: TransferFunction
     camera: Camera
     size: tuple[int, int] = (512, 512)
-    background: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    background: tuple[float, float, float] = DEFAULT_BACKGROUND
     settings: RenderSettings = RenderSettings()
     scalars: str | None = None
     component: int | None = None
@@ -89,7 +89,7 @@ class Scene:
             raise ValueError(f"scene 'component' must be an integer or null, got {component!r}")
         # The cheap checks come before the mesh is read.
         size = _int_pair(data.get("size", [512, 512]))
-        bg = _background(data.get("background", [1.0, 1.0, 1.0]))
+        bg = _background(data.get("background", list(DEFAULT_BACKGROUND)))
         settings_spec = data.get("settings", {})
         if not isinstance(settings_spec, dict):
             raise ValueError(f"scene 'settings' must be an object of RenderSettings fields, got {settings_spec!r}")

@@ -52,7 +52,7 @@ from numpy.typing import NDArray
 
 from .animate import azimuth
 from .camera import Camera
-from .image import psnr, rmse, write_png
+from .image import atomic_output, psnr, rmse, write_png
 from .mesh import TetMesh
 from .settings import RenderSettings
 from .transfer import TransferFunction
@@ -653,33 +653,52 @@ def write_report(result: dict[str, Any], outdir: str | os.PathLike[str], *,
                  images: dict[str, NDArray[np.float32]] | None = None, diff_gain: float = 10.0) -> Path:
     """Write ``comparison.json``, ``comparison.md`` and, with ``images``, the pictures.
 
-    Pictures: ``side_by_side.png`` (every method left to right in table order, over
-    black), ``differences.png`` (``|image - exact reference|`` of premultiplied RGB times
-    ``diff_gain``, same order) and one ``<key>.png`` / ``<key>_diff.png`` per method.
+    Pictures: ``side_by_side.png`` (every method in table order, four to a row, each
+    titled with its number, name and PSNR against the exact reference), ``differences.png``
+    (``|image - exact reference|`` of premultiplied RGB times ``diff_gain``, same order)
+    and one ``<key>.png`` / ``<key>_diff.png`` per method. Without matplotlib the two
+    grids are written untitled.
     """
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "comparison.json", "w") as f:
         json.dump(result, f, indent=2, default=float)
     if images:
-        keys = [m["key"] for m in result["methods"] if m["key"] in images]
         exact = images.get("reference_exact")
-        tiles, diffs = [], []
-        for key in keys:
-            img = images[key]
-            write_png(img, out / f"{key}.png", background=(0, 0, 0))
+        tiles, diffs, titles = [], [], []
+        for i, m in enumerate(result["methods"]):
+            if m["key"] not in images:
+                continue
+            img = images[m["key"]]
+            write_png(img, out / f"{m['key']}.png")
             tiles.append(img)
+            db = (m.get("psnr") or {}).get("exact")
+            name = m["label"] if len(m["label"]) <= 26 else m["key"]  # the table has the full name
+            score = "" if db is None else "\nthe reference" if math.isinf(db) else f"\n{_fmt(db, '.1f')} dB"
+            titles.append(f"{i + 1}. {name}{score}")
             if exact is not None:
                 d = np.zeros_like(img)
                 d[..., :3] = np.clip(np.abs(img[..., :3].astype(np.float64) - exact[..., :3]) * diff_gain, 0, 1)
                 d[..., 3] = 1.0
-                write_png(d, out / f"{key}_diff.png", background=None)
+                write_png(d, out / f"{m['key']}_diff.png", background=None)
                 diffs.append(d)
-        write_png(tile_images(tiles), out / "side_by_side.png", background=(0, 0, 0))
+        _write_grid(tiles, titles, out / "side_by_side.png", suptitle=None)
         if diffs:
-            write_png(tile_images(diffs), out / "differences.png", background=(0, 0, 0))
+            _write_grid(diffs, titles, out / "differences.png", suptitle=f"|image - exact reference| x {diff_gain:g}")
     (out / "comparison.md").write_text(_markdown(result, diff_gain))
     return out
+
+
+def _write_grid(images: list[NDArray[np.float32]], titles: list[str], path: Path, *, suptitle: str | None) -> None:
+    try:
+        from .annotate import panels
+
+        data = panels(images, titles, cols=min(4, len(images)), suptitle=suptitle)
+    except ImportError:  # matplotlib absent: the grid without its titles
+        write_png(tile_images(images), path)
+        return
+    with atomic_output(path) as f:
+        f.write(data)
 
 
 def tile_images(images: list[NDArray[np.float32]], cols: int = 4, gap: int = 4) -> NDArray[np.float32]:
@@ -728,7 +747,7 @@ def _markdown(result: dict[str, Any], gain: float) -> str:
             + " | ".join(_fmt(m["psnr"][o], ".1f") for o in refs)
             + f" | {_fmt(m.get('psnr_vs_vtk_pt'), '.1f')} | {_fmt(m['rmse']['exact'], '.2e')}"
             f" | {_fmt(m['max_abs_error'], '.3f')} |")
-    lines += ["", "Pictures, numbered as the table, four to a row, left to right: `side_by_side.png` "
-              f"(over black) and `differences.png` (|image - exact reference| x {gain:g}); one "
+    lines += ["", "Pictures, numbered and titled as the table, four to a row: `side_by_side.png` "
+              f"and `differences.png` (|image - exact reference| x {gain:g}); one "
               "`<key>.png` and `<key>_diff.png` per method.", ""]
     return "\n".join(lines)
