@@ -47,10 +47,14 @@ uniform vec2 u_half_px;  // NDC -> pixels: half the viewport size
 uniform vec2 u_rect_corner[FAN_VERTICES] = vec2[FAN_VERTICES](vec2(0.5), vec2(0.0, 0.0), vec2(1.0, 0.0),
                                                               vec2(1.0, 1.0), vec2(0.0, 1.0));
 
+// The longest segment any ray can cut from the tet being classified: its longest edge
+// (a tet's diameter), with a margin for rounding. tet.frag drops fragments beyond it.
+float g_chord = 0.0;
+
 // Fan vertex `slot` of the tet at local drawing position p.
 void put(int p, int slot, vec2 ndc, int exact_tet, vec4 segment) {
     int v = 2 * (FAN_VERTICES * p + slot);
-    fan_words[v] = uvec4(floatBitsToUint(ndc), uint(exact_tet), 0u);
+    fan_words[v] = uvec4(floatBitsToUint(ndc), uint(exact_tet), floatBitsToUint(g_chord));
     fan_words[v + 1] = floatBitsToUint(segment);
 }
 
@@ -119,6 +123,9 @@ void main() {
         p_ndc[k] = clip.xy / clip.w;
         s[k] = q.w;
     }
+    for (int a = 0; a < 3; ++a)
+        for (int b = a + 1; b < 4; ++b) g_chord = max(g_chord, distance(p_eye[a], p_eye[b]));
+    g_chord *= 1.0 + 1.0e-4;
     if (culled || beyond) {
         // Wholly outside the clipping range (FAN_CLIPPED): every vertex at one point
         // outside the view, nothing to draw.

@@ -26,8 +26,9 @@
 #define EXACT_NDC 8.0
 
 // One fan vertex (32 bytes, two uvec4; tetvr.gl.renderer._FAN_VERTEX_BYTES, _FAN_ATTRIBUTES):
-//   uvec4(floatBitsToUint(ndc.xy), uint(exact_tet), 0), floatBitsToUint(segment)
-// with exact_tet >= 0 for the exact path, else -1, and segment tet.vert's v_segment.
+//   uvec4(floatBitsToUint(ndc.xy), uint(exact_tet), floatBitsToUint(chord)), floatBitsToUint(segment)
+// with exact_tet >= 0 for the exact path, else -1, chord the longest segment the tet holds
+// (tet.vert's v_chord), and segment tet.vert's v_segment.
 #define FAN_VERTICES 5
 
 layout(std430, binding = 0) readonly buffer Points { vec4 points[]; };

@@ -19,6 +19,7 @@ noperspective in vec4 v_segment;
 noperspective in vec2 v_ray;  // eye-space x/depth, y/depth of the pixel's ray in perspective,
                               // its eye-space x, y in parallel projection
 flat in int v_exact_tet;
+flat in float v_chord;  // the longest segment the tet holds (its longest edge)
 
 out vec4 f_color;
 
@@ -69,8 +70,10 @@ void main() {
 #endif
     // Rounding can order a flat segment's ends the wrong way: its length is 0, not negative.
     float d = max(zb - zf, 0.0) * per_depth;
-    // An edge along the ray (a fan triangle of almost zero area) can extrapolate 1/w through
-    // zero: the segment is then not finite, and the fragment is dropped rather than NaN.
-    if (!(d < 3.0e38) || isnan(sf + sb)) discard;
+    // A fan triangle of almost zero area (a face edge-on through the eye, an edge along the
+    // ray) may be rasterised at a pixel whose centre lies just outside it, where its
+    // attributes extrapolate: a segment longer than the tet holds, or 1/w through zero and
+    // not finite. Such a fragment is outside the tet, and is dropped.
+    if (!(d <= v_chord) || isnan(sf + sb)) discard;
     f_color = lookup_table(vec2(sf, sb), d);
 }

@@ -17,10 +17,12 @@
 //      (table texture coordinate) of the thick vertex's ray, or of a silhouette vertex;
 //      noperspective v_ray: the ray of the fragment's pixel (see u_ray_scale): affine in
 //      screen space, so interpolating it is exact;
-//      flat v_exact_tet: >= 0, intersect the ray with this tet exactly in tet.frag.
+//      flat v_exact_tet: >= 0, intersect the ray with this tet exactly in tet.frag;
+//      flat v_chord: the longest segment the tet holds.
 
 in vec2 in_ndc;
 in int in_exact;
+in float in_chord;
 in vec4 in_segment;
 
 // NDC -> the pixel's ray: eye-space x, y per unit depth in perspective, eye-space x, y in
@@ -30,10 +32,12 @@ uniform vec2 u_ray_scale;
 noperspective out vec4 v_segment;
 noperspective out vec2 v_ray;
 flat out int v_exact_tet;
+flat out float v_chord;
 
 void main() {
     gl_Position = vec4(in_ndc, 0.0, 1.0);
     v_ray = in_ndc * u_ray_scale;
     v_segment = in_segment;
     v_exact_tet = in_exact;
+    v_chord = in_chord;
 }

@@ -131,6 +131,54 @@ def _near_plane() -> Case:
     return Case("near_plane_cut", mesh, cam, _tf(mesh), "the near plane cuts through many tets")
 
 
+def _face_through_eye() -> Case:
+    # Integer vertices; the face (0, 1, 2) lies in the plane x + y - z = -16, which holds
+    # the eye: the face projects to a line, and its fan triangles have zero area.
+    pts = np.array([[0.0, 0.0, 16.0], [10.0, 0.0, 26.0], [0.0, 10.0, 26.0], [5.0, 5.0, 10.0]])
+    mesh = TetMesh.from_arrays(pts, [[0, 1, 2, 3]], [0.0, 1.0, 0.5, 0.2])
+    cam = Camera(position=(31.0, -22.0, 25.0), focal_point=tuple(mesh.centroids[0]), view_up=(0, 0, 1),
+                 view_angle=30.0, clipping_range=(1.0, 200.0))
+    return Case("face_through_eye", mesh, cam, _tf(mesh, opacity=((0.0, 0.5), (1.0, 0.9)), units=8.0),
+                "a face whose plane holds the eye (fan triangles of zero area)")
+
+
+def _edge_along_ray() -> Case:
+    # Two vertices on the ray through the centre of pixel (40, 52) of a 96 x 96 view: the
+    # edge between them projects onto that pixel centre.
+    cam = Camera(position=(0.0, 0.0, 4.0), focal_point=(0.0, 0.0, 0.0), view_up=(0, 1, 0), view_angle=30.0,
+                 clipping_range=(0.5, 10.0))
+    o, d = cam.rays(96, 96)
+    ray = d.reshape(96, 96, 3)[52, 40]
+    ray = ray / np.linalg.norm(ray)
+    a, b = o.reshape(-1, 3)[0] + 3.4 * ray, o.reshape(-1, 3)[0] + 4.6 * ray
+    pts = np.array([a, b, a + (0.7, -0.2, -0.5), a + (-0.3, 0.6, -0.6)])
+    mesh = TetMesh.from_arrays(pts, [[0, 1, 2, 3]], [0.0, 1.0, 0.4, 0.8])
+    return Case("edge_along_ray", mesh, cam, _tf(mesh, units=1.5), "an edge along a pixel's ray")
+
+
+def _beside_eye() -> Case:
+    # The eye just outside a face of the cube, the near plane closer still: the tets at
+    # that face project to hundreds of viewport widths.
+    mesh = synthetic.cube(6, rotate=False)
+    cam = Camera(position=(0.03, -0.02, 0.505), focal_point=(0.2, 0.1, -0.5), view_up=(0, 1, 0), view_angle=60.0,
+                 clipping_range=(0.001, 5.0))
+    return Case("beside_the_eye", mesh, cam, _tf(mesh), "tets just past the near plane, far outside the viewport")
+
+
+def _spike_graded() -> Case:
+    c = _graded()
+    spike = ((0.0, 0.0), (0.29, 0.0), (0.3, 1.0), (0.31, 0.0), (0.7, 0.0), (0.72, 0.6), (1.0, 0.6))
+    return Case("spike_tf_graded", c.mesh, c.camera, _tf(c.mesh, opacity=spike), "iso-layer opacity spike on a graded mesh")
+
+
+def _cell_jumps() -> Case:
+    mesh = synthetic.cube(5)
+    values = np.random.default_rng(11).choice([0.0, 0.1, 1.0], mesh.n_tets)  # jumps of 10x at faces
+    mesh = mesh.with_cell_scalars(values, name="material")
+    return Case("cell_data_jumps", mesh, Camera.fit(mesh, direction=(-0.4, -0.3, -1.0)), _tf(mesh),
+                "cell data with large jumps between neighbours")
+
+
 def _tf_case(name: str, opacity, what: str, units: float = 4.0) -> Callable[[], Case]:
     def make() -> Case:
         mesh = synthetic.cube(4)
@@ -151,6 +199,11 @@ CASES: dict[str, Callable[[], Case]] = {
     "camera_inside": _inside,
     "camera_on_face": _on_face,
     "near_plane_cut": _near_plane,
+    "face_through_eye": _face_through_eye,
+    "edge_along_ray": _edge_along_ray,
+    "beside_the_eye": _beside_eye,
+    "spike_tf_graded": _spike_graded,
+    "cell_data_jumps": _cell_jumps,
     "step_tf": _tf_case("step_tf", ((0.0, 0.0), (0.499, 0.0), (0.501, 0.9), (1.0, 0.9)), "opacity step"),
     "spike_tf": _tf_case("spike_tf", ((0.0, 0.0), (0.49, 0.0), (0.5, 1.0), (0.51, 0.0), (1.0, 0.0)), "opacity spike (iso-layer)"),
     "opaque_tf": _tf_case("opaque_tf", ((0.0, 1.0), (1.0, 1.0)), "fully opaque transfer function"),

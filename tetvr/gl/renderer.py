@@ -44,7 +44,8 @@ _CHUNK_BYTES_PER_TET = 48
 #: One fan vertex as classify.comp writes it (common.glsl's FanVertex): uvec4(ndc.xy, exact
 #: tet, 0), then the segment; 5 per tet. The attributes of tet.vert: (name, class, format, offset).
 _FAN_VERTEX_BYTES = 32
-_FAN_ATTRIBUTES = (("in_ndc", "f", "2f", 0), ("in_exact", "i", "1i", 8), ("in_segment", "f", "4f", 16))
+_FAN_ATTRIBUTES = (("in_ndc", "f", "2f", 0), ("in_exact", "i", "1i", 8), ("in_chord", "f", "1f", 12),
+                   ("in_segment", "f", "4f", 16))
 _GROUP = 64  # classify.comp local size
 _MAX_GROUPS = 65535
 #: Most tets per draw call; the index buffer holds at most this many fan patterns (3 MiB).
