@@ -127,12 +127,15 @@ class Viewer:
         self.canvas = _Canvas(self._image_frame, self._image_event, css_width="100%",
                               css_height=f"{height + 2}px", resizable=False, cursor="grab")
         self.canvas.max_buffered_frames = 2
+        self.canvas.add_class("tetvr-image")  # names for styling and the browser tests
         self.status = w.HTML(value="rendering…")
+        self.status.add_class("tetvr-status")
         image_box = w.VBox([self.canvas, self.status],
                            layout=w.Layout(width=f"{width + 2}px", max_width="100%", min_width="120px"))
         self._hist_dirty = True
         self.hist = _Canvas(self._hist_frame, self._hist_event, css_width=f"{HIST_SIZE[0] + 2}px",
                             css_height=f"{HIST_SIZE[1] + LEGEND_HEIGHT + 2}px", resizable=False, cursor="crosshair")
+        self.hist.add_class("tetvr-hist")
         self.picker = HistogramPicker(m.editor, size=HIST_SIZE)
         self.ticks = w.HTML(layout=w.Layout(width=f"{HIST_SIZE[0] + 2}px", height="20px"))
         self.field = w.Dropdown(options=m.fields, value=m.field, description="field")
@@ -174,6 +177,7 @@ class Viewer:
                        w.HBox([self.lo, self.hi], layout=w.Layout(flex_flow="row wrap")), files],
                       layout=w.Layout(min_width="0", max_width="100%"))
         self.widget = w.HBox([image_box, side], layout=w.Layout(flex_flow="row wrap", width="100%"))
+        self.widget.add_class("tetvr-viewer")
         self._sync_ticks()
 
     # ---- display ----

@@ -1,0 +1,185 @@
+"""The Jupyter viewer in a real browser: JupyterLab + headless Chromium, checked by pixel hashes.
+
+One notebook shows ``Viewer(post.vtk, size=(480, 360))``; the tests run in order on that page
+(starting JupyterLab and the kernel once keeps the whole module near half a minute):
+
+* the viewer shows its full frame (480x360 pixels in the page's <img>);
+* a drag orbits and a wheel turn zooms: the picture's hash changes, then the full frame arrives;
+* a click-and-drag on the histogram adds an opacity point: the picture changes, the full frame arrives;
+* a 1 s drag of 30 moves is followed by the full frame within 2 s of mouse-up;
+* in an 800 px wide window the picture keeps its aspect, is drawn at the size shown, and
+  the viewer fits the window;
+* no severe console errors.
+
+A frame is "full" when the <img>'s natural size equals its size on the page (previews are
+smaller and stretched) and the status line says so. Each frame's arrival is logged in the
+page by a ``load`` listener on the <img> (``window.__frames``).
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from tests.browser.conftest import SIZE
+
+pytestmark = [pytest.mark.gl, pytest.mark.data]
+
+# FNV-1a over the RGBA bytes of what the <img> shows, with its natural size and its size on the
+# page inside its 1 px border.
+_HASH_JS = """
+const img = document.querySelector(arguments[0] + ' img');
+if (!img || !img.complete || img.naturalWidth < 2) return null;
+const c = document.createElement('canvas');
+c.width = img.naturalWidth; c.height = img.naturalHeight;
+const g = c.getContext('2d', {willReadFrequently: true});
+g.drawImage(img, 0, 0);
+const d = g.getImageData(0, 0, c.width, c.height).data;
+let h = 0x811c9dc5;
+for (let i = 0; i < d.length; i++) { h ^= d[i]; h = Math.imul(h, 0x01000193) >>> 0; }
+const r = img.getBoundingClientRect();
+return {hash: h, nw: img.naturalWidth, nh: img.naturalHeight, w: img.clientWidth, h: img.clientHeight, right: r.right,
+        status: (document.querySelector('.tetvr-status') || {}).textContent || ''};
+"""
+
+_WATCH_JS = """
+const img = document.querySelector('.tetvr-image img');
+if (!img || window.__watching) return !!img;
+window.__watching = true; window.__frames = []; window.__statuses = []; window.__up = null;
+img.addEventListener('load', () => window.__frames.push(
+    {t: performance.now(), nw: img.naturalWidth, nh: img.naturalHeight}));
+img.addEventListener('pointerup', () => { window.__up = performance.now(); }, true);
+const st = document.querySelector('.tetvr-status');
+new MutationObserver(() => window.__statuses.push(st.textContent)).observe(
+    st, {subtree: true, childList: true, characterData: true});
+return true;
+"""
+
+
+def _state(driver, which=".tetvr-image"):
+    return driver.execute_script(_HASH_JS, which)
+
+
+def _wait(driver, what, cond, timeout=30.0):
+    end = time.monotonic() + timeout
+    last = None
+    while time.monotonic() < end:
+        last = _state(driver)
+        if last is not None and cond(last):
+            return last
+        time.sleep(0.05)
+    pytest.fail(f"timed out after {timeout:.0f} s waiting for {what}; last state {last}")
+
+
+def _is_full(s):
+    # drawn at the size it is shown at (1 px of rounding), and the status line agrees
+    return abs(s["nw"] - s["w"]) <= 1.5 and abs(s["nh"] - s["h"]) <= 1.5 and "full" in s["status"]
+
+
+def _full_and_changed(before):
+    return lambda s: _is_full(s) and s["hash"] != before["hash"]
+
+
+@pytest.fixture(scope="module")
+def page(lab, browser):
+    """The notebook open, its cell run, the viewer's full frame shown."""
+    from tests.browser.lab import open_and_run
+
+    open_and_run(browser, lab, ".tetvr-image img")
+    assert browser.execute_script(_WATCH_JS)
+    first = _wait(browser, "the first full frame", _is_full, timeout=90)
+    return browser, first
+
+
+def _drag(driver, selector, moves, dx, dy, seconds):
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    el = driver.find_element("css selector", selector)
+    chain = ActionChains(driver, duration=0).move_to_element(el).click_and_hold()
+    for _ in range(moves):
+        chain = chain.move_by_offset(dx, dy).pause(seconds / moves)
+    chain.release().perform()
+
+
+def test_the_viewer_shows_its_full_frame(page):
+    _, first = page
+    assert (first["nw"], first["nh"]) == SIZE
+    assert first["w"] / first["h"] == pytest.approx(4 / 3, rel=0.01)
+
+
+def test_a_drag_orbits_and_the_wheel_zooms(page):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
+
+    driver, _ = page
+    before = _state(driver)
+    _drag(driver, ".tetvr-image img", 8, 12, 2, 0.3)
+    orbited = _wait(driver, "the full frame after the drag", _full_and_changed(before))
+    el = driver.find_element("css selector", ".tetvr-image img")
+    ActionChains(driver).scroll_from_origin(ScrollOrigin.from_element(el), 0, -300).perform()
+    zoomed = _wait(driver, "the full frame after the wheel", _full_and_changed(orbited))
+    assert len({before["hash"], orbited["hash"], zoomed["hash"]}) == 3
+
+
+def test_a_histogram_edit_changes_the_picture_and_the_full_frame_arrives(page):
+    driver, _ = page
+    before = _state(driver)
+    hist_before = _state(driver, ".tetvr-hist")
+    # Press on empty space at 40 % of the range, low opacity; drag the new point up.
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    el = driver.find_element("css selector", ".tetvr-hist img")
+    rect = el.rect
+    x0, y0 = -rect["width"] * 0.1, rect["height"] * 0.2  # offsets from the element's centre
+    ActionChains(driver, duration=0).move_to_element_with_offset(el, int(x0), int(y0)).click_and_hold() \
+        .move_by_offset(0, -40).pause(0.1).move_by_offset(0, -20).release().perform()
+    _wait(driver, "the full frame after the edit", _full_and_changed(before))
+    assert _state(driver, ".tetvr-hist")["hash"] != hist_before["hash"]
+
+
+def test_the_full_frame_follows_a_one_second_drag_within_two_seconds(page):
+    driver, _ = page
+    before = _state(driver)
+    driver.execute_script("window.__frames = []; window.__statuses = []; window.__up = null;")
+    _drag(driver, ".tetvr-image img", 30, -4, 1, 1.0)
+    after = _wait(driver, "the full frame after a 1 s drag", _full_and_changed(before), timeout=20)
+    frames, up, statuses = driver.execute_script("return [window.__frames, window.__up, window.__statuses]")
+    assert up is not None, "the page saw no mouse-up"
+    full = [f for f in frames if f["t"] > up and (f["nw"], f["nh"]) == (after["nw"], after["nh"])]
+    assert full, f"no full frame logged after mouse-up: {frames}"
+    delay = (full[0]["t"] - up) / 1000.0
+    previews = [f for f in frames if f["t"] < up and f["nw"] < after["nw"]]
+    assert previews, "no preview was shown during the drag"
+    assert any("rendering" in s for s in statuses), f"no 'rendering…' feedback: {statuses[:10]}"
+    print(f"full frame {delay:.2f} s after mouse-up; {len(previews)} previews during the drag")
+    assert delay < 2.0, f"the full frame came {delay:.2f} s after mouse-up"
+
+
+def test_the_layout_keeps_the_aspect_in_an_800px_window(page):
+    driver, _ = page
+    size = driver.get_window_size()
+    try:
+        before = _state(driver)
+        driver.set_window_size(800, 900)
+        state = _wait(driver, "a full frame after narrowing the window",
+                      lambda s: _is_full(s) and s["right"] <= driver.execute_script("return window.innerWidth"))
+        inner = driver.execute_script("return window.innerWidth")
+        print(f"800 px window: picture {state}")
+        assert state["w"] / state["h"] == pytest.approx(4 / 3, rel=0.02), state
+        assert state["nw"] / state["nh"] == pytest.approx(4 / 3, rel=0.02), state
+        assert state["w"] <= before["w"] + 1
+        hist = driver.find_element("css selector", ".tetvr-hist img").rect
+        assert hist["x"] + hist["width"] <= inner, "the histogram editor is off-screen"
+        for button in driver.find_elements("css selector", ".tetvr-viewer button"):
+            r = button.rect
+            assert r["x"] + r["width"] <= inner, f"button {button.text!r} is off-screen"
+    finally:
+        driver.set_window_size(size["width"], size["height"])
+
+
+def test_no_severe_console_errors(page):
+    driver, _ = page
+    severe = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"
+              and "favicon" not in e["message"]]
+    assert not severe, "\n".join(e["message"] for e in severe)
