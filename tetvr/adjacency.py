@@ -111,7 +111,8 @@ def face_adjacency(mesh: TetMesh) -> FaceAdjacency:
     >>> face_adjacency(mesh) is face_adjacency(mesh.with_scalars(mesh.scalars * 2))
     True
     """
-    key = (id(mesh.points), id(mesh.tets))
+    # The origin too: a mesh given another float32 origin shares its arrays with the first.
+    key = (id(mesh.points), id(mesh.tets), mesh.float32_origin.tobytes())
     adj = _CACHE.get(key)
     if adj is None:
         built = _build(mesh)
@@ -173,7 +174,7 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
     mates[q] = p
     nbr = np.where(mates >= 0, mates // 4, -1).astype(np.int32)
 
-    origin = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+    origin = np.array(mesh.float32_origin)  # the bounding box's centre unless a whole mesh's was given
     rel = pts - origin
     radius = float(np.sqrt(np.max(np.einsum("ij,ij->i", rel, rel))))
     # Corner coordinates as (m, 4) arrays per axis: component-wise arithmetic on these

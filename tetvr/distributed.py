@@ -46,7 +46,7 @@ import logging
 import os
 import threading
 import warnings
-from typing import Any, Iterator, Sequence, Union
+from typing import Any, Iterator, Union
 
 import numpy as np
 from numpy.typing import NDArray
@@ -55,18 +55,16 @@ from .camera import Camera
 from .image import image_size
 from .mesh import TetMesh
 from .settings import RenderSettings
+from .bricks import (Brick, BrickTree, Split, Whole, _check_n_bricks, clip_to_box, composite_over, kd_bricks,
+                     leaf_boxes, leaf_paths, merge_parts, part_mesh, plan_bricks, select_cells, visibility_order)
 from .transfer import TransferFunction
 
-__all__ = ["Brick", "BrickTree", "Split", "kd_bricks", "visibility_order", "composite_over", "render_bricks", "render_series",
-           "series_sources", "cluster_client", "worker_renderer"]
+__all__ = ["ClusterBricks", "distribute_mesh", "distribute_pieces", "render_bricks", "render_pieces", "render_series",
+           "series_sources", "cluster_client", "worker_renderer",
+           # the bricks themselves (tetvr.bricks), here too for one import
+           "Brick", "BrickTree", "Split", "Whole", "kd_bricks", "visibility_order", "composite_over"]
 
 _EXTRA = 'tetvr.distributed needs dask.distributed: pip install "tetvr[dask]"'
-#: A split plane whose straddle-free position is this far (as a fraction of the node's cells)
-#: from the balanced rank is not taken; the centroid median is, unseparated.
-SEPARABLE_IMBALANCE = 0.25
-# A cutting plane goes in the widest gap between vertex coordinates among this many on
-# either side of the median centroid.
-_GAP_WINDOW = 32
 
 
 def _dask() -> Any:
@@ -280,269 +278,91 @@ def render_series(
 
 # ---- sort-last bricks ----
 
-@dataclasses.dataclass(frozen=True, eq=False)
-class Brick:
-    """A leaf of the k-d tree: its tets, as ids of the tree's points."""
-
-    index: int
-    tets: NDArray[np.int64]
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class Split:
-    """A node: what lies below ``plane`` on ``axis`` goes to ``low``, the rest to ``high``.
-    ``n_cut``: cells cut in two at the plane; ``separable``: no cell reaches across the
-    plane (true when every straddling cell was cut), so the two sides composite exactly in
-    plane order."""
-
-    axis: int
-    plane: float
-    low: "Brick | Split"
-    high: "Brick | Split"
-    n_cut: int
-    separable: bool
-
-    def bricks(self) -> list[Brick]:
-        return [b for side in (self.low, self.high) for b in (side.bricks() if isinstance(side, Split) else [side])]
+def _render_brick(brick: TetMesh, index: int, label: str, camera: Camera, tf: TransferFunction,
+                  size: tuple[int, int], settings: RenderSettings) -> NDArray[np.float32]:
+    try:
+        return worker_renderer(settings).render(brick, camera, tf, size=size)
+    except Exception as exc:
+        # Named, so that a failed frame says which brick (and which pieces) it was.
+        raise RuntimeError(f"brick {index} ({label}) could not be rendered: {exc}") from exc
 
 
-@dataclasses.dataclass(frozen=True, eq=False)
-class BrickTree:
-    """A mesh split into bricks (:func:`kd_bricks`): the tree, and the points and scalars
-    its bricks index (the mesh's own, then the points made where planes cut cells)."""
+def _hold(brick: TetMesh) -> TetMesh:
+    return brick
 
-    root: "Split | Brick"
-    points: NDArray[np.float64]
-    scalars: NDArray[np.float64]
-    mesh: TetMesh
 
-    def bricks(self) -> list[Brick]:
-        return self.root.bricks() if isinstance(self.root, Split) else [self.root]
+class ClusterBricks:
+    """One mesh as k-d bricks (:mod:`tetvr.bricks`) held by a cluster's workers, each
+    worker only its bricks; :meth:`render` renders a view on the workers and composites
+    it on the client. Made by :func:`distribute_mesh` or :func:`distribute_pieces`.
+
+    Attributes
+    ----------
+    root : the k-d tree (its planes order the bricks for each view).
+    whole : what the bricks share with the whole mesh (:class:`tetvr.bricks.Whole`).
+    labels : each brick's name in error messages (the pieces it came from).
+    """
+
+    def __init__(self, client: Any, futures: dict[int, Any], root: "Split | Brick", whole: Whole,
+                 labels: dict[int, str], chooser: TetMesh | None = None) -> None:
+        self.client = client
+        self.futures = futures
+        self.root = root
+        self.whole = whole
+        self.labels = labels
+        self._chooser = chooser  # the mesh (or a sample of it) that "auto" chooses the method by
 
     @property
-    def separable(self) -> bool:
-        return _all_separable(self.root)
+    def n_bricks(self) -> int:
+        return len(self.futures)
 
-    @property
-    def n_cut(self) -> int:
-        return _count_cut(self.root)
+    def settings_for(self, settings: RenderSettings, camera: Camera, size: tuple[int, int]) -> RenderSettings:
+        """``settings`` with ``method="auto"`` resolved for the whole mesh: every brick then
+        renders with the method the whole would have (a brick alone could choose another)."""
+        from .method import AUTO_MAX_TETS, choose
 
-    def brick_mesh(self, brick: Brick) -> TetMesh:
-        """One brick as a mesh that renders like a part of the whole: it keeps every point
-        (so its bounds, float32 origin and scalar range are the whole mesh's) and the
-        whole mesh's longest edge and segment sample, which size the table."""
-        from .tablesize import segment_sample
+        if settings.method != "auto":
+            return settings
+        if self.whole.n_tets > AUTO_MAX_TETS:
+            method = "projected"
+        else:
+            method = choose(settings, self._chooser, camera, size)
+        return dataclasses.replace(settings, method=method)
 
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # slivers of a cut below the flatness bound: dropped
-            sub = TetMesh.from_arrays(self.points, brick.tets, self.scalars, scalar_name=self.mesh.scalar_name)
-        object.__setattr__(sub, "max_edge", self.mesh.max_edge)
-        object.__setattr__(sub, "_segment_sample", segment_sample(self.mesh))
-        return sub
+    def render(self, camera: Camera, tf: TransferFunction, *, size: tuple[int, int] = (512, 512),
+               settings: RenderSettings | None = None) -> NDArray[np.float32]:
+        """The (height, width, 4) premultiplied float32 image of the whole mesh."""
+        size = image_size(size)
+        settings = self.settings_for(settings or RenderSettings(), camera, size)
+        c = self.client
+        futures = {i: c.submit(_render_brick, f, i, self.labels[i], camera, tf, size, settings, pure=False)
+                   for i, f in self.futures.items()}
+        images = dict(zip(futures, c.gather(list(futures.values()))))
+        return composite_over([images[i] for i in visibility_order(self.root, camera)])
 
-    def visibility_order(self, camera: Camera) -> list[int]:
-        return visibility_order(self.root, camera)
-
-
-def kd_bricks(mesh: TetMesh, n_bricks: int, *, cut: bool = True) -> BrickTree:
-    """Split ``mesh`` into ``n_bricks`` bricks by a k-d tree of axis-aligned planes.
-
-    Each plane balances the bricks' cell counts. It moves to the nearest plane no cell
-    straddles when one lies within :data:`SEPARABLE_IMBALANCE` of the node's cells (on the
-    longest axis of the node's centroids, else another): a grid's face, a block boundary.
-    Where there is none it crosses the longest axis at the median centroid (nudged off
-    the vertices) and, with ``cut``, the cells it crosses are cut there into tets on
-    either side (the field is linear on a tet, so the pieces carry it exactly; the pieces
-    conform, :func:`tetvr.cells.split_cells`), so every brick is a box of the mesh. Without
-    ``cut`` they are assigned by centroid and the split is not separable.
-
-    Examples
-    --------
-    >>> from tetvr import synthetic
-    >>> tree = kd_bricks(synthetic.cube(4, rotate=False), 4)
-    >>> [len(b.tets) for b in tree.bricks()], tree.separable, tree.n_cut
-    ([96, 96, 96, 96], True, 0)
-    """
-    if isinstance(n_bricks, bool) or not isinstance(n_bricks, (int, np.integer)) or n_bricks < 1:
-        raise ValueError(f"n_bricks must be a positive integer, got {n_bricks!r}")
-    if n_bricks > mesh.n_tets:
-        raise ValueError(f"n_bricks ({n_bricks}) is more than the mesh's {mesh.n_tets} cells")
-    state = {"points": mesh.points, "scalars": mesh.scalars}
-    counter = iter(range(n_bricks))
-
-    def build(tets: NDArray[np.int64], n: int) -> "Split | Brick":
-        if n == 1:
-            return Brick(next(counter), tets)
-        pts = state["points"]
-        corners = pts[tets]
-        lo, hi, c = corners.min(axis=1), corners.max(axis=1), corners.mean(axis=1)
-        n_low = n // 2
-        want = len(tets) * n_low // n  # cells below the plane for balanced bricks
-        for axis in np.argsort(-(c.max(axis=0) - c.min(axis=0)), kind="stable").tolist():
-            plane, low = _separating_plane(lo[:, axis], hi[:, axis], want)
-            if plane is not None:
-                return Split(axis, plane, build(tets[low], n_low), build(tets[~low], n - n_low), 0, True)
-        axis = int(np.argmax(c.max(axis=0) - c.min(axis=0)))
-        order = np.argsort(c[:, axis], kind="stable")
-        plane = 0.5 * (c[order[want - 1], axis] + c[order[want], axis])
-        if not cut:
-            low = np.zeros(len(tets), dtype=bool)
-            low[order[:want]] = True
-            separable = not np.any((lo[:, axis] < plane) & (hi[:, axis] > plane))
-            return Split(axis, float(plane), build(tets[low], n_low), build(tets[~low], n - n_low), 0, separable)
-        plane = _plane_off_vertices(pts[np.unique(tets), axis], plane)
-        state["points"], state["scalars"], below, above, n_cut = _cut_at_plane(
-            state["points"], state["scalars"], tets, axis, float(plane))
-        if len(below) == 0 or len(above) == 0:
-            raise ValueError(f"cannot split {len(tets)} cells into {n} bricks: a plane leaves one side empty")
-        return Split(axis, float(plane), build(below, n_low), build(above, n - n_low), n_cut, True)
-
-    root = build(mesh.tets.astype(np.int64), int(n_bricks))
-    return BrickTree(root, state["points"], state["scalars"], mesh)
+    def release(self) -> None:
+        """Let the workers drop the bricks."""
+        for f in self.futures.values():
+            f.release()
+        self.futures = {}
 
 
-def _plane_off_vertices(coords: NDArray[np.float64], plane: float, window: int = _GAP_WINDOW) -> float:
-    """The middle of the widest gap between vertex coordinates within ``window`` of
-    ``plane``: every cut is then a clean 1|3 or 2|2 one, far (for this mesh) from its
-    vertices, so no piece is a sliver flat to rounding."""
-    c = np.unique(coords)
-    i = int(np.searchsorted(c, plane))
-    lo, hi = max(1, i - window), min(len(c), i + window)
-    if hi <= lo:
-        return plane
-    gaps = c[lo:hi] - c[lo - 1:hi - 1]
-    j = lo + int(np.argmax(gaps))
-    return float(0.5 * (c[j - 1] + c[j]))
-
-
-def _separating_plane(lo: NDArray[np.float64], hi: NDArray[np.float64], want: int
-                      ) -> tuple[float | None, NDArray[np.bool_]]:
-    """The plane no cell straddles (``lo < plane < hi``) whose count of cells below is
-    nearest ``want``, if within the imbalance allowed; else ``(None, ...)``."""
-    n = len(lo)
-    cand = np.unique(hi)
-    below = np.searchsorted(np.sort(hi), cand, side="right")  # cells wholly at or below the plane
-    started = np.searchsorted(np.sort(lo), cand, side="left")  # cells starting below it
-    ok = (started == below) & (below > 0) & (below < n)
-    if not ok.any():
-        return None, np.zeros(n, dtype=bool)
-    k = np.flatnonzero(ok)[np.argmin(np.abs(below[ok] - want))]
-    if abs(int(below[k]) - want) > SEPARABLE_IMBALANCE * n:
-        return None, np.zeros(n, dtype=bool)
-    plane = float(cand[k])
-    return plane, hi <= plane
-
-
-def _cut_at_plane(points: NDArray[np.float64], scalars: NDArray[np.float64], tets: NDArray[np.int64], axis: int,
-                  plane: float) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64],
-                                         NDArray[np.int64], int]:
-    """Cut ``tets`` at the plane ``x[axis] = plane`` (on no vertex). Returns the points
-    and scalars with the edge crossings appended, the tets below and above, and how many
-    cells were cut.
-
-    A cut tet with one vertex on one side leaves a tet there and a wedge on the other; one
-    with two on each side, two wedges. Each crossing point is made once per edge, so the
-    pieces of neighbouring cells share it, and wedges are split into tets by the smallest
-    global id on each quad (:func:`tetvr.cells.split_cells`), so the pieces conform.
-    """
-    from .cells import split_cells
-
-    d = points[tets, axis] - plane
-    below = d < 0
-    n_below = below.sum(axis=1)
-    keep_low, keep_high = tets[n_below == 4], tets[n_below == 0]
-    straddle = (n_below > 0) & (n_below < 4)
-    if not straddle.any():
-        return points, scalars, keep_low, keep_high, 0
-    # Each cut tet's vertices, those below first.
-    order = np.argsort(~below[straddle], axis=1, kind="stable")
-    t = np.take_along_axis(tets[straddle], order, axis=1)
-    nb = n_below[straddle]
-    # One new point per crossed edge.
-    pairs = np.concatenate([t[:, [i, j]] for i in range(4) for j in range(i + 1, 4)])
-    pairs = pairs[(points[pairs[:, 0], axis] < plane) != (points[pairs[:, 1], axis] < plane)]
-    n_pts = points.shape[0]
-    keys = np.unique(np.minimum(pairs[:, 0], pairs[:, 1]) * n_pts + np.maximum(pairs[:, 0], pairs[:, 1]))
-    u, v = keys // n_pts, keys % n_pts
-    du, dv = points[u, axis] - plane, points[v, axis] - plane
-    w = (du / (du - dv))[:, None]
-    new_pts = points[u] + w * (points[v] - points[u])
-    new_pts[:, axis] = plane
-    new_s = scalars[u] + w[:, 0] * (scalars[v] - scalars[u])
-
-    def x(a: NDArray[np.int64], b: NDArray[np.int64]) -> NDArray[np.int64]:
-        k = np.minimum(a, b) * n_pts + np.maximum(a, b)
-        return n_pts + np.searchsorted(keys, k)
-
-    pieces_tet: list[NDArray[np.int64]] = []
-    pieces_wedge: list[NDArray[np.int64]] = []
-    side_tet: list[NDArray[np.bool_]] = []
-    side_wedge: list[NDArray[np.bool_]] = []
-    one = t[nb == 1]  # one below: a tet below, a wedge above
-    if len(one):
-        v0, a, b, c = one.T
-        xa, xb, xc = x(v0, a), x(v0, b), x(v0, c)
-        pieces_tet.append(np.stack([v0, xa, xb, xc], 1))
-        side_tet.append(np.ones(len(one), dtype=bool))
-        pieces_wedge.append(np.stack([a, b, c, xa, xb, xc], 1))
-        side_wedge.append(np.zeros(len(one), dtype=bool))
-    three = t[nb == 3]  # one above: a wedge below, a tet above
-    if len(three):
-        a, b, c, v0 = three.T
-        xa, xb, xc = x(a, v0), x(b, v0), x(c, v0)
-        pieces_tet.append(np.stack([v0, xa, xb, xc], 1))
-        side_tet.append(np.zeros(len(three), dtype=bool))
-        pieces_wedge.append(np.stack([a, b, c, xa, xb, xc], 1))
-        side_wedge.append(np.ones(len(three), dtype=bool))
-    two = t[nb == 2]  # two on each side: a wedge each
-    if len(two):
-        a, b, c, dd = two.T
-        xac, xad, xbc, xbd = x(a, c), x(a, dd), x(b, c), x(b, dd)
-        pieces_wedge += [np.stack([a, xac, xad, b, xbc, xbd], 1), np.stack([c, xac, xbc, dd, xad, xbd], 1)]
-        side_wedge += [np.ones(len(two), dtype=bool), np.zeros(len(two), dtype=bool)]
-    all_pts = np.concatenate([points, new_pts])
-    all_s = np.concatenate([scalars, new_s])
-    tet_in = np.concatenate(pieces_tet) if pieces_tet else np.zeros((0, 4), dtype=np.int64)
-    wedge_in = np.concatenate(pieces_wedge) if pieces_wedge else np.zeros((0, 6), dtype=np.int64)
-    split = split_cells(all_pts, [("tetra", tet_in), ("wedge", wedge_in)])
-    is_low = np.concatenate(side_tet + side_wedge)[split.parent]
-    all_pts = split.points
-    all_s = split.extend(all_s)
-    cut_tets = split.tets.astype(np.int64)
-    low = np.concatenate([keep_low, cut_tets[is_low]])
-    high = np.concatenate([keep_high, cut_tets[~is_low]])
-    return all_pts, all_s, low, high, int(straddle.sum())
-
-
-def visibility_order(tree: "BrickTree | Split | Brick", camera: Camera) -> list[int]:
-    """Brick indices front to back for ``camera``: at each split, the side the eye is on
-    first (parallel projection: the side the view direction comes from)."""
-    if isinstance(tree, BrickTree):
-        tree = tree.root
-    if isinstance(tree, Brick):
-        return [tree.index]
-    if camera.parallel_projection:
-        d = np.asarray(camera.focal_point) - np.asarray(camera.position)
-        low_first = d[tree.axis] >= 0  # looking towards +axis: the low side is nearer
-    else:
-        low_first = camera.position[tree.axis] <= tree.plane
-    first, second = (tree.low, tree.high) if low_first else (tree.high, tree.low)
-    return visibility_order(first, camera) + visibility_order(second, camera)
-
-
-def composite_over(images_front_to_back: Sequence[NDArray[Any]]) -> NDArray[np.float32]:
-    """Premultiplied RGBA images composited "over", the first in front (in float64)."""
-    if not images_front_to_back:
-        raise ValueError("nothing to composite")
-    out = np.asarray(images_front_to_back[0], dtype=np.float64).copy()
-    for img in images_front_to_back[1:]:
-        out += (1.0 - out[..., 3:4]) * np.asarray(img, dtype=np.float64)
-    return out.astype(np.float32)
-
-
-def _render_brick(brick: TetMesh, camera: Camera, tf: TransferFunction, size: tuple[int, int],
-                  settings: RenderSettings) -> NDArray[np.float32]:
-    return worker_renderer(settings).render(brick, camera, tf, size=size)
+def distribute_mesh(mesh: TetMesh, n_bricks: int, client: Any, *, tree: BrickTree | None = None) -> ClusterBricks:
+    """Split ``mesh`` (held here) into ``n_bricks`` k-d bricks (:func:`tetvr.bricks.kd_bricks`)
+    and hand them to the workers of ``client`` (a ``distributed.Client``)."""
+    tree = tree if tree is not None else kd_bricks(mesh, n_bricks)
+    if tree.mesh is not mesh:
+        raise ValueError("tree was split from another mesh")
+    if len(tree.bricks()) != n_bricks:
+        raise ValueError(f"tree has {len(tree.bricks())} bricks, n_bricks is {n_bricks}")
+    if not tree.separable:
+        warnings.warn("some k-d split planes run through cells (kd_bricks(cut=False)): the composite is "
+                      "approximate within a cell's width of those planes", stacklevel=3)
+    # Each brick travels inside its task (not scattered): a worker that dies loses no
+    # data, the scheduler reruns the task elsewhere.
+    futures = {b.index: client.submit(_hold, tree.brick_mesh(b), pure=False) for b in tree.bricks()}
+    return ClusterBricks(client, futures, tree.root, tree.whole, {i: f"{len(tree.bricks())} k-d bricks of the mesh"
+                                                                  for i in futures}, chooser=mesh)
 
 
 def render_bricks(
@@ -556,8 +376,9 @@ def render_bricks(
     client: Any = None,
     tree: BrickTree | None = None,
 ) -> NDArray[np.float32]:
-    """Render ``mesh`` as ``n_bricks`` k-d bricks (:func:`kd_bricks`) on the cluster's
-    workers and composite them "over" on the client in visibility order.
+    """Render ``mesh`` as ``n_bricks`` k-d bricks (:func:`tetvr.bricks.kd_bricks`) on the
+    cluster's workers and composite them "over" on the client in visibility order. For
+    several views, keep the bricks on the workers: :func:`distribute_mesh`.
 
     Returns the (height, width, 4) premultiplied float32 image.
 
@@ -565,34 +386,153 @@ def render_bricks(
     --------
     >>> image = render_bricks(mesh, camera, tf, n_bricks=4, size=(256, 256))  # doctest: +SKIP
     """
-    settings = settings or RenderSettings()
-    size = image_size(size)
-    tree = tree if tree is not None else kd_bricks(mesh, n_bricks)
-    if tree.mesh is not mesh:
-        raise ValueError("tree was split from another mesh")
-    if len(tree.bricks()) != n_bricks:
-        raise ValueError(f"tree has {len(tree.bricks())} bricks, n_bricks is {n_bricks}")
-    if not tree.separable:
-        warnings.warn("some k-d split planes run through cells (kd_bricks(cut=False)): the composite is "
-                      "approximate within a cell's width of those planes", stacklevel=2)
-    leaves = tree.bricks()
-    order = tree.visibility_order(camera)
     with cluster_client(client) as c:
-        # Each brick travels inside its task (not scattered ahead): a worker that dies
-        # loses no data, and its task reruns elsewhere.
-        futures = [c.submit(_render_brick, tree.brick_mesh(b), camera, tf, size, settings, pure=False)
-                   for b in leaves]
-        images = dict(zip([b.index for b in leaves], c.gather(futures)))
-    return composite_over([images[i] for i in order])
+        bricks = distribute_mesh(mesh, n_bricks, c, tree=tree)
+        try:
+            return bricks.render(camera, tf, size=size, settings=settings)
+        finally:
+            bricks.release()
 
 
-def _all_separable(tree: "Split | Brick") -> bool:
-    if isinstance(tree, Brick):
-        return True
-    return tree.separable and _all_separable(tree.low) and _all_separable(tree.high)
+# ---- solver pieces, redistributed into k-d bricks on the workers ----
+
+def _read_piece(path: str, scalars: str | None, component: int | None) -> TetMesh:
+    from .mesh import read
+
+    try:
+        return read(path, scalars, component=component)
+    except Exception as exc:
+        raise ValueError(f"piece {path!r} could not be read: {exc}") from exc
 
 
-def _count_cut(tree: "Split | Brick") -> int:
-    if isinstance(tree, Brick):
-        return 0
-    return tree.n_cut + _count_cut(tree.low) + _count_cut(tree.high)
+def _piece_summary(piece: TetMesh, n_segments: int) -> dict[str, Any]:
+    from .tablesize import sample_segments
+
+    seg = sample_segments(piece, n_segments)
+    return {"n_tets": piece.n_tets, "bounds": piece.bounds, "scalar_range": piece.scalar_range,
+            "max_edge": piece.max_edge, "segments": seg, "scalar_name": piece.scalar_name}
+
+
+def _piece_sample(piece: TetMesh, k: int) -> NDArray[np.float64]:
+    ids = np.linspace(0, piece.n_tets - 1, max(1, min(k, piece.n_tets))).round().astype(np.int64)
+    return piece.points[piece.tets[ids]]
+
+
+def _piece_part(piece: TetMesh, box: NDArray[np.float64]) -> tuple[Any, Any, Any]:
+    return select_cells(piece, box)
+
+
+def _assemble_brick(index: int, label: str, path: list[tuple[int, float, bool]], whole: Whole, scalar_name: str,
+                    *parts: tuple[Any, Any, Any]) -> TetMesh:
+    points, tets, scalars = merge_parts(parts)
+    points, tets, scalars, _ = clip_to_box(points, tets, scalars, path)
+    if len(tets) == 0:
+        raise ValueError(f"brick {index} ({label}) holds no cells: fewer bricks, or a larger sample")
+    return part_mesh(points, tets, scalars, whole, scalar_name=scalar_name)
+
+
+def _combined_sample(summaries: list[dict[str, Any]]) -> Any:
+    """The pieces' segment samples as one, each piece weighted by its share of the cells."""
+    from .tablesize import SegmentSample
+
+    total = sum(s["n_tets"] for s in summaries)
+    segs = [s["segments"] for s in summaries]
+    w = np.concatenate([g.weight * (s["n_tets"] / total) for g, s in zip(segs, summaries)])
+    return SegmentSample(front=np.concatenate([g.front for g in segs]), back=np.concatenate([g.back for g in segs]),
+                         length=np.concatenate([g.length for g in segs]), weight=w / w.sum())
+
+
+def distribute_pieces(pieces: Any, n_bricks: int, client: Any, *, scalars: str | None = None,
+                      component: int | None = None, sample: int = 20_000) -> ClusterBricks:
+    """Read a mesh's solver pieces on the workers and redistribute them into ``n_bricks``
+    k-d bricks there; the client holds only a sample of the cells.
+
+    ``pieces``: a ``.pvtu`` (or ``.vtm``) file, or a list of mesh files that together make
+    one mesh (points on the pieces' shared faces with equal coordinates are joined). Solver
+    partitions are not convex and cannot be ordered as wholes; the bricks are boxes
+    (ParaView's ``vtkRedistributeDataSet`` before IceT does the same).
+
+    1. each piece is read on a worker (a piece that cannot be read fails naming its file);
+       its summary (bounds, scalar range, longest edge, a segment sample) and a sample of
+       ``sample`` cells in all, drawn evenly, come back;
+    2. the k-d planes are chosen on the sample (:func:`tetvr.bricks.plan_bricks`);
+    3. each piece sends every brick the cells that overlap its box; the brick's worker
+       joins them and cuts them at its box's planes (:func:`tetvr.bricks.clip_to_box`).
+
+    Examples
+    --------
+    >>> with cluster_client() as c:                                      # doctest: +SKIP
+    ...     bricks = distribute_pieces("run_0042.pvtu", 8, c)
+    ...     image = bricks.render(camera, tf, size=(1024, 1024))
+    """
+    from .collections import pieces as piece_files
+    from .tablesize import _N_SEGMENTS
+
+    if isinstance(pieces, (str, os.PathLike)):
+        files = [os.path.abspath(f) for f in piece_files(pieces)]
+    else:
+        files = [os.path.abspath(os.fspath(f)) for f in pieces]
+    if not files:
+        raise ValueError("no pieces given")
+    read = [client.submit(_read_piece, f, scalars, component, pure=False) for f in files]
+    per_piece = max(256, _N_SEGMENTS // len(files))
+    summaries = client.gather([client.submit(_piece_summary, r, per_piece, pure=False) for r in read])
+    total = sum(s["n_tets"] for s in summaries)
+    _check_n_bricks(n_bricks, total)
+    corners = np.concatenate(client.gather([
+        client.submit(_piece_sample, r, max(1, -(-sample * s["n_tets"] // total)), pure=False)
+        for r, s in zip(read, summaries)]))
+    bounds = np.stack([np.min([s["bounds"][0] for s in summaries], axis=0),
+                       np.max([s["bounds"][1] for s in summaries], axis=0)])
+    whole = Whole(bounds=bounds, float32_origin=bounds.mean(axis=0),
+                  scalar_range=(min(s["scalar_range"][0] for s in summaries),
+                                max(s["scalar_range"][1] for s in summaries)),
+                  max_edge=max(s["max_edge"] for s in summaries), segment_sample=_combined_sample(summaries),
+                  n_tets=total)
+    root = plan_bricks(corners, n_bricks)
+    boxes = leaf_boxes(root, bounds)
+    paths = leaf_paths(root)
+    name = summaries[0]["scalar_name"]
+    futures, labels = {}, {}
+    for i, box in boxes.items():
+        # A piece's cells may overlap the box's bounds but not its inside: such a piece
+        # sends nothing useful, and is named anyway (the label says where cells came from).
+        pieces_in = [k for k, s in enumerate(summaries)
+                     if np.all(s["bounds"][0] < box[1]) and np.all(s["bounds"][1] > box[0])]
+        labels[i] = "pieces " + ", ".join(os.path.basename(files[k]) for k in pieces_in)
+        parts = [client.submit(_piece_part, read[k], box, pure=False) for k in pieces_in]
+        futures[i] = client.submit(_assemble_brick, i, labels[i], paths[i], whole, name, *parts, pure=False)
+    client.gather(list(futures.values()))  # made (and any error raised) before the pieces go
+    del read
+    chooser = TetMesh.from_arrays(corners.reshape(-1, 3), np.arange(corners.shape[0] * 4).reshape(-1, 4),
+                                  np.zeros(corners.shape[0] * 4))
+    chooser.__dict__["bounds"] = bounds  # "auto" asks whether the eye is near the whole mesh
+    return ClusterBricks(client, futures, root, whole, labels, chooser=chooser)
+
+
+def render_pieces(
+    pieces: Any,
+    camera: Camera,
+    tf: TransferFunction,
+    *,
+    n_bricks: int,
+    size: tuple[int, int] = (512, 512),
+    settings: RenderSettings | None = None,
+    scalars: str | None = None,
+    component: int | None = None,
+    client: Any = None,
+) -> NDArray[np.float32]:
+    """Render a mesh given as solver pieces (a ``.pvtu``, or a list of files) as
+    ``n_bricks`` k-d bricks on the cluster (:func:`distribute_pieces`); the client never
+    reads the mesh.
+
+    Examples
+    --------
+    >>> image = render_pieces("run_0042.pvtu", camera, tf, n_bricks=8)  # doctest: +SKIP
+    """
+    with cluster_client(client) as c:
+        bricks = distribute_pieces(pieces, n_bricks, c, scalars=scalars, component=component)
+        try:
+            return bricks.render(camera, tf, size=size, settings=settings)
+        finally:
+            bricks.release()
