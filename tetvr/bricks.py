@@ -211,6 +211,7 @@ def kd_bricks(mesh: TetMesh, n_bricks: int, *, cut: bool = True) -> BrickTree:
     ([96, 96, 96, 96], True, 0)
     """
     _check_n_bricks(n_bricks, mesh.n_tets)
+    _no_cell_data(mesh)
     state = {"points": mesh.points, "scalars": mesh.scalars}
     counter = iter(range(n_bricks))
 
@@ -243,6 +244,12 @@ def kd_bricks(mesh: TetMesh, n_bricks: int, *, cut: bool = True) -> BrickTree:
 
     root = build(mesh.tets.astype(np.int64), int(n_bricks))
     return BrickTree(root, state["points"], state["scalars"], mesh)
+
+
+def _no_cell_data(mesh: TetMesh) -> None:
+    if mesh.cell_scalars is not None:
+        raise NotImplementedError(f"bricks of a mesh with cell data ({mesh.scalar_name!r}) are not made yet: split "
+                                  "mesh.averaged() (the field averaged to the points), or read with cell_data='average'")
 
 
 def _check_n_bricks(n_bricks: Any, n_tets: int) -> None:
@@ -491,6 +498,7 @@ def leaf_boxes(tree: "Split | Brick", bounds: ArrayLike) -> dict[int, NDArray[np
 def select_cells(mesh: TetMesh, box: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
     """The cells of ``mesh`` whose bounding box overlaps the inside of ``box``, as
     (points, tets, scalars) of their own points: what a piece sends to one brick."""
+    _no_cell_data(mesh)
     b = np.asarray(box, dtype=np.float64).reshape(2, 3)
     corners = mesh.points[mesh.tets]
     lo, hi = corners.min(axis=1), corners.max(axis=1)

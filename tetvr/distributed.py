@@ -406,8 +406,10 @@ def _read_piece(path: str, scalars: str | None, component: int | None) -> TetMes
 
 
 def _piece_summary(piece: TetMesh, n_segments: int) -> dict[str, Any]:
+    from .bricks import _no_cell_data
     from .tablesize import sample_segments
 
+    _no_cell_data(piece)
     seg = sample_segments(piece, n_segments)
     return {"n_tets": piece.n_tets, "bounds": piece.bounds, "scalar_range": piece.scalar_range,
             "max_edge": piece.max_edge, "segments": seg, "scalar_name": piece.scalar_name}
