@@ -75,8 +75,30 @@ def test_missing_gl_gives_an_install_hint(monkeypatch):
         raise Exception("eglGetDisplay failed")
 
     monkeypatch.setattr(moderngl, "create_standalone_context", broken)
-    with pytest.raises(GLUnavailableError, match=r"OpenGL 4\.3.*eglGetDisplay failed.*apt-get install libegl1"):
+    with pytest.raises(GLUnavailableError, match=r"OpenGL 4\.3.*EGL: Exception: eglGetDisplay failed.*"
+                                                 r"the platform default: .*apt-get install libegl1"):
         create_context()
+
+
+def test_without_egl_the_platform_default_context_is_used(monkeypatch):
+    import moderngl
+
+    from tetvr.gl.context import create_context
+
+    real = moderngl.create_standalone_context
+    asked = []
+
+    def no_egl(**kwargs):
+        asked.append(kwargs.get("backend"))
+        if kwargs.get("backend") == "egl":
+            raise Exception("libEGL.so.1: cannot open shared object file")
+        return real(backend="egl", require=kwargs["require"])  # this machine's stand-in for GLX/WGL/CGL
+
+    monkeypatch.setattr(moderngl, "create_standalone_context", no_egl)
+    with Renderer() as r:  # the context it got from the fallback renders
+        mesh = synthetic.cube(2)
+        img = r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(8, 8))
+    assert asked == ["egl", None] and img[..., 3].max() > 0.1
 
 
 def test_gpu_bytes_counts_what_the_renderer_holds():

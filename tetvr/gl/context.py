@@ -1,4 +1,5 @@
-"""Headless OpenGL contexts through EGL, with errors that say how to get one.
+"""Headless OpenGL contexts through EGL (or the platform's default context where EGL is
+absent), with errors that say how to get one.
 
 A context is current in at most one thread at a time (EGL), and a GL driver does not
 survive ``fork``. So a context made here is left current nowhere: every use makes it
@@ -18,16 +19,21 @@ import weakref
 from typing import Any, Iterator
 
 __all__ = ["GLUnavailableError", "ForkedProcessError", "create_context", "current_in_thread", "context_lock",
-           "context_alive", "check_not_forked", "REQUIRED_GL"]
+           "context_alive", "check_not_forked", "REQUIRED_GL", "BACKENDS"]
 
 #: Compute shaders and shader storage buffers need OpenGL 4.3.
 REQUIRED_GL = 430
 
 _INSTALL_HINT = (
-    "tetvr renders through a headless EGL context. On Debian/Ubuntu install Mesa's EGL and "
-    "software rasteriser:  sudo apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1  "
-    "(on an NVIDIA machine the driver's libEGL_nvidia is used instead)."
+    "tetvr renders through a headless EGL context, or else the platform's default one. On "
+    "Debian/Ubuntu install Mesa's EGL and software rasteriser:  sudo apt-get install libegl1 libegl-mesa0 "
+    "libgl1-mesa-dri libgbm1  (on an NVIDIA machine the driver's libEGL_nvidia is used instead). On "
+    "Windows the GPU driver's OpenGL (WGL) serves; macOS stops at OpenGL 4.1, without compute shaders."
 )
+
+#: The context backends tried in turn: headless EGL, then the platform's default
+#: (GLX on Linux with a display, WGL on Windows, CGL on macOS), for machines without EGL.
+BACKENDS: tuple[str | None, ...] = ("egl", None)
 
 _FORK_MESSAGE = (
     "this process was forked (os.fork, or multiprocessing's 'fork' start method, the default on Linux "
@@ -225,21 +231,33 @@ def _restore(ctx: Any, state: _ContextState, prior: _Binding | None) -> None:
 
 # ---- creation ----
 def create_context() -> Any:
-    """A standalone moderngl context on EGL (OpenGL >= 4.3 core), current in no thread:
-    use it inside :func:`current_in_thread` (or moderngl's ``with ctx:``)."""
+    """A standalone moderngl context (OpenGL >= 4.3 core), current in no thread: use it
+    inside :func:`current_in_thread` (or moderngl's ``with ctx:``).
+
+    EGL first (headless: no display needed); where EGL is absent or fails, the
+    platform's default context (:data:`BACKENDS`). If neither can be made, the error
+    names what each attempt said and how to install a driver."""
     check_not_forked()
     try:
         import moderngl
     except ImportError as exc:  # pragma: no cover - moderngl is a hard dependency
         raise GLUnavailableError(f"moderngl is not installed ({exc}); pip install moderngl") from exc
     prior = _egl_current()
-    try:
-        ctx = moderngl.create_standalone_context(backend="egl", require=REQUIRED_GL)  # type: ignore[arg-type]
-    except Exception as exc:
+    failures: list[str] = []
+    ctx = None
+    for backend in BACKENDS:
+        try:
+            kwargs = {"backend": backend} if backend else {}
+            ctx = moderngl.create_standalone_context(require=REQUIRED_GL, **kwargs)  # type: ignore[arg-type]
+            break
+        except Exception as exc:
+            failures.append(f"{'EGL' if backend == 'egl' else backend or 'the platform default'}: "
+                            f"{type(exc).__name__}: {exc}")
+    if ctx is None:
         raise GLUnavailableError(
-            f"could not create an OpenGL {REQUIRED_GL // 100}.{REQUIRED_GL % 100 // 10} context through EGL: "
-            f"{type(exc).__name__}: {exc}. {_INSTALL_HINT}"
-        ) from exc
+            f"could not create an OpenGL {REQUIRED_GL // 100}.{REQUIRED_GL % 100 // 10} context "
+            f"({'; '.join(failures)}). {_INSTALL_HINT}"
+        )
     state = _state(ctx)
     with state.lock:
         # moderngl left the new context current in this thread: note its EGL binding, read
