@@ -17,8 +17,10 @@
 // lies inside one voxel cell, where the trilinear field is a smooth cubic along the ray:
 // taking it as linear errs by h^2/8 |s''| instead of h/4 times the jump in slope at the
 // cell's faces, and a maximum at a voxel that the ray passes through is sampled exactly.
-// Every piece is looked up in the pre-integration table (lookup.glsl) with its true
-// length, so the integrated interval does not depend on the sampling.
+// Every piece is integrated with its true length, so the integrated interval does not
+// depend on the sampling: INTEGRATION_EXACT 1 cuts it at the transfer function's control
+// points and integrates each cut exactly (raycast_exact.glsl); 0 looks it up in the
+// pre-integration table (lookup.glsl).
 //
 // RAYCAST_MODE (a define): 0 emission-absorption, 1 maximum intensity, 2 mean intensity
 // ("xray"), 3 first hit of u_iso, Blinn-Phong shaded (headlight).
@@ -27,6 +29,9 @@
 
 #include "lookup.glsl"
 #include "raycast_sample.glsl"
+#if RAYCAST_MODE == 0 && INTEGRATION_EXACT
+#include "raycast_exact.glsl"
+#endif
 
 uniform vec2 u_inv_viewport;     // 1 / (width, height)
 uniform int u_perspective;       // 1 perspective, 0 parallel
@@ -129,6 +134,10 @@ void main() {
     float s_prev = scalar_at(p0_idx);
 #if RAYCAST_MODE == 0
     vec4 acc = vec4(0.0);
+#if INTEGRATION_EXACT
+    int i_prev;
+    vec4 v_prev = tf_point_at(s_prev, i_prev);
+#endif
 #elif RAYCAST_MODE == 1
     float s_max = s_prev;
 #elif RAYCAST_MODE == 2
@@ -145,7 +154,15 @@ void main() {
         plane_m += vec3(lessThanEqual(off_plane, vec3(off_next)));
         float s_next = scalar_at(p0_idx + off_next * d_idx);
 #if RAYCAST_MODE == 0
+#if INTEGRATION_EXACT
+        int i_next;
+        vec4 v_next = tf_point_at(s_next, i_next);
+        vec4 piece = integrate_piece(s_prev, v_prev, i_prev, s_next, v_next, i_next, (off_next - off_prev) * world_per_t);
+        v_prev = v_next;
+        i_prev = i_next;
+#else
         vec4 piece = lookup_segment(s_prev, s_next, (off_next - off_prev) * world_per_t);
+#endif
         acc += (1.0 - acc.a) * piece;
         if (acc.a >= u_termination) break;
 #elif RAYCAST_MODE == 1

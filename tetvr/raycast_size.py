@@ -45,13 +45,16 @@ from .tablesize import SegmentSample, scalar_axis_error
 from .transfer import TransferFunction
 from .volume import Volume
 
-__all__ = ["auto_step", "auto_bins", "voxel_depth", "AUTO_BINS", "STEP_BOUNDS", "MIP_STEP", "DEFAULT_TOLERANCE"]
+__all__ = ["auto_step", "auto_table", "auto_bins", "auto_integration", "voxel_depth", "feature_voxels", "AUTO_BINS",
+           "STEP_BOUNDS", "MIP_STEP", "DEFAULT_TOLERANCE"]
 
 #: Step (voxels of the smallest spacing) at the reference optical depth per voxel.
 STEP_REF = 0.25
 DEPTH_REF = 0.8
 #: The emission-absorption step stays within these (voxels).
 STEP_BOUNDS = (0.125, 0.5)
+#: ... and at most this times the square root of :func:`feature_voxels`.
+STEP_PER_FEATURE = 0.5
 #: Maximum intensity's step (voxels); xray and isosurface keep half a voxel.
 MIP_STEP = 0.25
 OTHER_STEP = 0.5
@@ -73,6 +76,30 @@ def voxel_depth(volume: Volume, tf: TransferFunction) -> float:
     return float(extinction(a, tf.unit_distance).max()) * float(volume.spacing.min())
 
 
+def feature_voxels(volume: Volume, tf: TransferFunction) -> float:
+    """How many voxels a ray takes to cross the transfer function's narrowest opacity
+    ramp: the ramp's scalar width over the field's change per voxel where it is seen
+    (the upper quartile of neighbour differences at the sample of :func:`_visible_points`)."""
+    o = np.asarray(tf.opacity, dtype=np.float64)
+    lo, hi = volume.scalar_range
+    widths = np.diff(o[:, 0])[(np.diff(o[:, 1]) != 0) & (o[1:, 0] > lo) & (o[:-1, 0] < hi)]
+    if widths.size == 0:
+        return math.inf
+    gradient = _gradient_per_voxel(volume, tf)
+    return float(widths.min()) / gradient if gradient > 0 else math.inf
+
+
+@functools.lru_cache(maxsize=32)
+def _gradient_per_voxel(volume: Volume, tf: TransferFunction) -> float:
+    p = _visible_points(volume, tf)
+    hi = np.asarray(volume.dims, dtype=np.float64) - 1.0
+    base = volume.sample_index(p)
+    diffs = [np.abs(volume.sample_index(np.minimum(p + e, hi)) - base) for e in np.eye(3)]
+    d = np.concatenate(diffs)
+    d = d[d > 0]
+    return float(np.percentile(d, 75)) if d.size else 0.0
+
+
 def auto_step(volume: Volume, tf: TransferFunction, mode: str) -> float:
     """The "auto" step in world units for ``mode`` (see the module notes).
 
@@ -89,35 +116,52 @@ def auto_step(volume: Volume, tf: TransferFunction, mode: str) -> float:
     if mode == "emission_absorption":
         depth = voxel_depth(volume, tf)
         f = STEP_REF * math.sqrt(DEPTH_REF / depth) if depth > 0 else STEP_BOUNDS[1]
+        f = min(f, STEP_PER_FEATURE * math.sqrt(feature_voxels(volume, tf)))
         return h * min(max(f, STEP_BOUNDS[0]), STEP_BOUNDS[1])
     return h * (MIP_STEP if mode == "mip" else OTHER_STEP)
 
 
-def _visible_values(volume: Volume, tf: TransferFunction, n: int = _N_POINTS) -> np.ndarray:
-    """Up to ``n`` field values at seeded random points where the opacity is not 0 (all
-    the points if none is)."""
+def _visible_points(volume: Volume, tf: TransferFunction, n: int = _N_POINTS) -> np.ndarray:
+    """Up to ``n`` seeded random index points where the opacity is not 0 (all the
+    points if there is none)."""
     rng = np.random.default_rng(0)
     hi = np.asarray(volume.dims, dtype=np.float64) - 1.0
-    values = volume.sample_index(rng.uniform(0.0, 1.0, (16 * n, 3)) * hi)
-    _, a = tf.evaluate(values)
-    seen = values[a > 0]
-    return (seen if seen.size else values)[:n]
+    p = rng.uniform(0.0, 1.0, (16 * n, 3)) * hi
+    _, a = tf.evaluate(volume.sample_index(p))
+    seen = p[a > 0]
+    return (seen if seen.shape[0] else p)[:n]
+
+
+def auto_table(volume: Volume, tf: TransferFunction, n_bins: int | str = "auto", *,
+               tolerance: float = DEFAULT_TOLERANCE) -> tuple[int, float]:
+    """The fewest bins (of :data:`AUTO_BINS`, or ``n_bins`` if given) whose aligned nodes
+    keep constant slabs at the volume's values within ``tolerance`` (else the most), and
+    that estimate (see the module notes)."""
+    candidates = AUTO_BINS if n_bins == "auto" else (int(n_bins),)
+    return _table(volume, tf, candidates, float(tolerance))
 
 
 def auto_bins(volume: Volume, tf: TransferFunction, *, tolerance: float = DEFAULT_TOLERANCE) -> int:
-    """The fewest :data:`AUTO_BINS` whose aligned nodes keep constant slabs at the
-    volume's values within ``tolerance`` (see the module notes); else the most."""
-    return _bins(volume, tf, float(tolerance))
+    """:func:`auto_table`'s bins."""
+    return auto_table(volume, tf, tolerance=tolerance)[0]
+
+
+def auto_integration(volume: Volume, tf: TransferFunction, n_bins: int | str = "auto", *,
+                     tolerance: float = DEFAULT_TOLERANCE) -> str:
+    """``"table"`` where :func:`auto_table` meets ``tolerance``, else ``"exact"``."""
+    return "table" if auto_table(volume, tf, n_bins, tolerance=tolerance)[1] <= tolerance else "exact"
 
 
 @functools.lru_cache(maxsize=32)
-def _bins(volume: Volume, tf: TransferFunction, tolerance: float) -> int:
-    values = _visible_values(volume, tf)
+def _table(volume: Volume, tf: TransferFunction, candidates: tuple[int, ...], tolerance: float) -> tuple[int, float]:
+    values = volume.sample_index(_visible_points(volume, tf))
     length = np.full(values.shape, SLAB_VOXELS * float(volume.spacing.min()))
     sample = SegmentSample(front=values, back=values, length=length,
                            weight=np.full(values.shape, 1.0 / values.size))
     rng = table_scalar_range(volume.scalar_range, tf)
-    for n in AUTO_BINS:
-        if scalar_axis_error(tf, aligned_scalar_range(rng, tf, n), n, sample) <= tolerance:
-            return n
-    return AUTO_BINS[-1]
+    error = math.inf
+    for n in candidates:
+        error = scalar_axis_error(tf, aligned_scalar_range(rng, tf, n), n, sample)
+        if error <= tolerance:
+            return n, error
+    return candidates[-1], error

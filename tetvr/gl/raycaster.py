@@ -25,8 +25,8 @@ from numpy.typing import ArrayLike, NDArray
 from .._checks import check_instances
 from ..camera import Camera
 from ..image import _gib, check_memory
-from ..preintegrate import PreintegrationTable, table_build_bytes, table_for, table_scalar_range
-from ..raycast_reference import INTERPOLATIONS, RAYCAST_MODES, RaycastSettings, normalize_ray_limits
+from ..preintegrate import PreintegrationTable, check_unit_distance, table_build_bytes, table_for, table_scalar_range
+from ..raycast_reference import INTEGRATIONS, INTERPOLATIONS, RAYCAST_MODES, RaycastSettings, normalize_ray_limits
 from ..transfer import TransferFunction
 from ..volume import Volume
 from .context import context_alive, create_context, describe
@@ -42,17 +42,21 @@ class _Mode:
     """How a mode is drawn: its shader defines and what it reads."""
 
     defines: tuple[tuple[str, int], ...]
-    uses_table: bool  # the pre-integration table (else only the 1D transfer function)
+    integrates: bool  # emission-absorption: a table or the control points (else the 1D transfer function)
 
 
 #: Rendering mode -> shader variant (see :class:`~tetvr.raycast_reference.RaycastSettings`).
 MODES: dict[str, _Mode] = {
-    "emission_absorption": _Mode(defines=(("RAYCAST_MODE", 0),), uses_table=True),
-    "mip": _Mode(defines=(("RAYCAST_MODE", 1),), uses_table=False),
-    "xray": _Mode(defines=(("RAYCAST_MODE", 2),), uses_table=False),
-    "isosurface": _Mode(defines=(("RAYCAST_MODE", 3),), uses_table=False),
+    "emission_absorption": _Mode(defines=(("RAYCAST_MODE", 0),), integrates=True),
+    "mip": _Mode(defines=(("RAYCAST_MODE", 1),), integrates=False),
+    "xray": _Mode(defines=(("RAYCAST_MODE", 2),), integrates=False),
+    "isosurface": _Mode(defines=(("RAYCAST_MODE", 3),), integrates=False),
 }
 assert tuple(MODES) == RAYCAST_MODES
+
+#: Integration of emission-absorption -> INTEGRATION_EXACT define.
+_INTEGRATIONS = {"exact": 1, "table": 0}
+assert set(_INTEGRATIONS) | {"auto"} == set(INTEGRATIONS)
 
 #: Reconstruction -> INTERPOLATION_CUBIC define.
 _INTERPOLATIONS = {"linear": 0, "cubic": 1}
@@ -160,6 +164,8 @@ class Raycaster(GLOwner):
         self._table_tex: Any = None
         self._tf_key: tuple[Any, ...] | None = None
         self._tf_tex: Any = None
+        self._tf_points_tex: Any = None
+        self._tf_points_key: TransferFunction | None = None
         self._limits_tex: Any = None
         self._limits_size: tuple[int, int] = (0, 0)
         self._no_limits_tex: Any = None
@@ -173,24 +179,26 @@ class Raycaster(GLOwner):
     def _forget(self) -> None:
         self._programs.clear()
         self._vaos.clear()
-        self._volume_tex = self._table_tex = self._tf_tex = self._limits_tex = None
+        self._volume_tex = self._table_tex = self._tf_tex = self._limits_tex = self._tf_points_tex = None
+        self._tf_points_key = None
         self._no_limits_tex = self._fbo = self._fbo_tex = None
         self._volume = self._gpu_volume = None
         self._table = None
 
     def _gl_objects(self) -> list[Any]:
         objs = [*self._vaos.values(), *self._programs.values()]
-        objs += [o for o in (self._volume_tex, self._table_tex, self._tf_tex, self._limits_tex,
+        objs += [o for o in (self._volume_tex, self._table_tex, self._tf_tex, self._tf_points_tex, self._limits_tex,
                              self._no_limits_tex, self._fbo, self._fbo_tex) if o is not None]
         return objs
 
     # ---- programs ----
     @gl_locked  # tests and tools call it directly
-    def _program(self, mode: str, interpolation: str = "linear") -> Any:
+    def _program(self, mode: str, interpolation: str = "linear", integration: str = "exact") -> Any:
         spec = MODES[mode]
         defines = dict(spec.defines)
         defines["TABLE_NORMALIZED"] = 1
         defines["INTERPOLATION_CUBIC"] = _INTERPOLATIONS[interpolation]
+        defines["INTEGRATION_EXACT"] = _INTEGRATIONS[integration] if spec.integrates else 0
         key = tuple(f"{k}={v}" for k, v in sorted(defines.items()))
         prog = self._programs.get(key)
         if prog is not None:
@@ -203,7 +211,7 @@ class Raycaster(GLOwner):
         except ShaderCompileError:
             raise
         except Exception as exc:
-            raise ShaderCompileError(f"raycast ({mode}, {interpolation}): {explain(exc, files)}") from exc
+            raise ShaderCompileError(f"raycast ({mode}, {interpolation}, {integration}): {explain(exc, files)}") from exc
         self._programs[key] = prog
         return prog
 
@@ -291,6 +299,23 @@ class Raycaster(GLOwner):
         self._tf_tex = tex
         self._tf_key = key
 
+    def _use_tf_points(self, tf: TransferFunction) -> None:
+        """The transfer function's control points for raycast_exact.glsl: row 0 (scalar,
+        opacity), row 1 the colour, one texel per point of the union of both maps."""
+        if tf == self._tf_points_key:
+            return
+        bp = tf.breakpoints
+        rgb, a = tf.evaluate(bp)
+        data = np.zeros((2, bp.shape[0], 4), np.float32)
+        data[0, :, 0], data[0, :, 1], data[1, :, :3] = bp, a, rgb
+        if self._tf_points_tex is not None:
+            self._tf_points_tex.release()
+            self._tf_points_tex = None
+        tex = self.ctx.texture((bp.shape[0], 2), 4, data.tobytes(), dtype="f4")
+        tex.repeat_x = tex.repeat_y = False
+        self._tf_points_tex = tex
+        self._tf_points_key = tf
+
     def _use_limits(self, t_start: ArrayLike | None, t_end: ArrayLike | None, size: tuple[int, int]) -> bool:
         import moderngl
 
@@ -374,7 +399,13 @@ class Raycaster(GLOwner):
         # the 1D transfer function then spans the same range, since both read u_scalar_range.
         scalar_range = table_scalar_range(volume.scalar_range, tf)
         table_uniforms: dict[str, Any] = {}
-        if mode.uses_table:
+        integration = s.integration_for(volume, tf) if mode.integrates else "table"
+        uses_table = mode.integrates and integration == "table"
+        if mode.integrates and integration == "exact":
+            self._use_tf_points(tf)
+            table_uniforms = dict(u_tf_points=4, u_tf_count=self._tf_points_tex.width,
+                                  u_inv_unit_distance=min(1.0 / check_unit_distance(tf.unit_distance), 1e30))
+        if uses_table:
             table = self.table(volume, tf, s)
             self._use_table(table)
             table_uniforms = table.gl_uniforms()
@@ -399,7 +430,7 @@ class Raycaster(GLOwner):
         a_inv = gpu.world_to_index[:3, :3]
         clip_lo, clip_hi = (np.asarray(s.clip_box[0]) - centre, np.asarray(s.clip_box[1]) - centre) \
             if s.clip_box is not None else (np.zeros(3), np.zeros(3))
-        prog = self._program(s.mode, s.interpolation)
+        prog = self._program(s.mode, s.interpolation, integration)
         uniforms = dict(
             u_inv_viewport=(1.0 / width, 1.0 / height), u_perspective=0 if camera.parallel_projection else 1,
             u_k=(k * aspect, k), u_eye_to_index=eye_to_index, u_eye_to_local=eye_to_local,
@@ -418,8 +449,10 @@ class Raycaster(GLOwner):
         self._fbo.clear(0.0, 0.0, 0.0, 0.0)
         import moderngl
 
-        if mode.uses_table:
+        if uses_table:
             self._table_tex.use(0)
+        if mode.integrates and integration == "exact":
+            self._tf_points_tex.use(4)
         self._volume_tex.use(1)
         self._tf_tex.use(2)
         (self._limits_tex if use_limits else self._no_limits_tex).use(3)
