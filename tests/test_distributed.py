@@ -373,3 +373,42 @@ def test_a_killed_worker_loses_no_frame(client, tmp_path):
     assert sorted(p.name for p in folder.iterdir()) == [f"f_{k:02d}.png" for k in range(12)]  # no temporaries left
     client.wait_for_workers(2, timeout=60)  # the nanny restarts the killed worker
     assert victim not in client.run(os.getpid).values()
+
+
+@pytest.mark.parametrize("kind", ["pvd", "glob", "xdmf"])
+def test_cli_animate_on_the_cluster_writes_the_serial_frames(client, tmp_path, kind, monkeypatch):
+    """`tetvr animate --time-series ... --scheduler ADDRESS` over a .pvd, a glob pattern
+    or an XDMF time series writes the same PNG bytes as the serial command; without the
+    flag, TETVR_SCHEDULER names the cluster."""
+    import json
+
+    from tetvr.cli import main
+
+    if kind == "xdmf":
+        mesh = synthetic.cube(4)
+        series = tmp_path / "run.xdmf"
+        with meshio.xdmf.TimeSeriesWriter(str(series), data_format="XML") as w:
+            w.write_points_cells(mesh.points, [("tetra", mesh.tets)])
+            for k in range(3):
+                w.write_data(0.5 * k, point_data={"f": mesh.scalars * (1 + 0.25 * k)})
+        first = tmp_path / "s0.vtu"
+        meshio.Mesh(mesh.points, [("tetra", mesh.tets)], point_data={"f": mesh.scalars}).write(first)
+        n = 3
+    else:
+        series = _write_series(tmp_path, 3)
+        first, n = tmp_path / "s0.vtu", 3
+        if kind == "glob":
+            series = tmp_path / "s*.vtu"
+    scene = tmp_path / "scene.json"
+    scene.write_text(json.dumps({"mesh": str(first), "scalars": "f", "size": [40, 30]}))
+    assert main(["animate", str(scene), "--time-series", str(series), "-o", str(tmp_path / "serial"),
+                 "--no-progress"]) == 0
+    monkeypatch.setenv("TETVR_SCHEDULER", client.scheduler.address)
+    assert main(["animate", str(scene), "--time-series", str(series), "-o", str(tmp_path / "dask"),
+                 "--no-progress"]) == 0
+    serial = sorted((tmp_path / "serial").iterdir())
+    assert [p.name for p in serial] == [f"frame_{k:04d}.png" for k in range(n)]
+    assert [p.name for p in sorted((tmp_path / "dask").iterdir())] == [p.name for p in serial]
+    for p in serial:
+        assert p.read_bytes() == (tmp_path / "dask" / p.name).read_bytes(), p.name
+    assert serial[0].read_bytes() != serial[-1].read_bytes()

@@ -86,7 +86,8 @@ def read_time_series(source: str | os.PathLike[str] | Sequence[str | os.PathLike
                      *, component: int | None = None) -> Iterator[tuple[float, TetMesh]]:
     """Yield ``(time, mesh)`` for each step of a time series.
 
-    ``source`` is either a list of mesh files (one per step; time = the index), or one
+    ``source`` is either a list of mesh files (one per step; time = the index), a ``.pvd``
+    collection (its steps and times), or one
     XDMF time series written by ``meshio.xdmf.TimeSeriesWriter`` (read with its
     ``TimeSeriesReader``; HDF5-backed files need h5py). ``scalars``/``component`` pick
     the field as in :func:`tetvr.read`.
@@ -97,6 +98,13 @@ def read_time_series(source: str | os.PathLike[str] | Sequence[str | os.PathLike
         path = Path(source)
         if path.suffix.lower() in (".xdmf", ".xmf"):
             yield from _read_xdmf_series(path, scalars, component)
+            return
+        if path.suffix.lower() == ".pvd":
+            from .collections import read_pvd, read_step
+
+            coll = read_pvd(path)
+            for i, t in enumerate(coll.times):
+                yield t, read_step(coll, i, scalars, component=component)
             return
         paths: list[Any] = [path]
     else:
@@ -205,7 +213,7 @@ def _write_video(images: Iterable[ArrayLike], out: Path, background: Sequence[fl
 
 def animate(scene: Any, out: str | os.PathLike[str], *, orbit_frames: int | None = None, degrees: float = 360.0,
             time_series: Any = None, fps: float = 12.0, size: tuple[int, int] | None = None,
-            progress: bool = True) -> list[Path]:
+            progress: bool = True, scheduler: Any = None) -> list[Path]:
     """Render a scene's orbit or time series to ``out`` (a folder of PNGs, or a video).
 
     Parameters
@@ -219,6 +227,9 @@ def animate(scene: Any, out: str | os.PathLike[str], *, orbit_frames: int | None
         too, the camera turns while time runs, one step per frame.
     fps : frames per second of a video.
     size : (width, height); default the scene's.
+    scheduler : render the time series on a Dask cluster (:func:`tetvr.distributed.animate_series`):
+        a ``distributed.Client``, a scheduler address, or ``"local"`` for a ``LocalCluster``
+        on this machine's cores; None renders here, one frame after another.
     """
     from .scene import Scene, load_scene
 
@@ -226,6 +237,14 @@ def animate(scene: Any, out: str | os.PathLike[str], *, orbit_frames: int | None
         scene = load_scene(scene)
     if orbit_frames is None and time_series is None:
         raise ValueError("nothing to animate: give orbit_frames, time_series or both")
+    if scheduler is not None:
+        if time_series is None or orbit_frames is not None:
+            raise ValueError("a scheduler renders a time series with the scene's camera: give time_series "
+                             "and no orbit_frames")
+        from .distributed import animate_series
+
+        return animate_series(scene, time_series, out, client=None if scheduler == "local" else scheduler, fps=fps,
+                              size=size, progress=progress)
     size = tuple(size or scene.size)  # type: ignore[assignment]
     if time_series is not None:
         steps = [m for _, m in read_time_series(time_series, scene.scalars, component=scene.component)]

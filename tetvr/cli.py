@@ -396,13 +396,32 @@ def _animate(args: argparse.Namespace) -> int:
     elif os.path.isdir(args.output):
         _refuse_overwrite_in(args.output, re.compile(r"frame_\d{4,}\.png").fullmatch, "frames",  # type: ignore[arg-type]
                              inputs)
-    series = args.time_series
-    if series is not None and len(series) == 1:
-        series = series[0]  # one file: an XDMF time series (or a single step)
+    series = _expand_series(args.time_series)
+    scheduler = args.scheduler or os.environ.get("TETVR_SCHEDULER") or None
     files = animate(scene, args.output, orbit_frames=args.orbit, degrees=args.degrees,
-                    time_series=series, fps=args.fps, progress=not args.no_progress)
+                    time_series=series, fps=args.fps, progress=not args.no_progress, scheduler=scheduler)
     print(f"wrote {len(files)} file(s): {files[0]}{' ...' if len(files) > 1 else ''}")
     return EXIT_OK
+
+
+def _expand_series(series: Sequence[str] | None) -> Any:
+    """The --time-series arguments: one file (an XDMF time series, a .pvd collection, a
+    single step), or mesh files, with glob patterns the shell left unexpanded
+    (``"run/step_*.vtu"``) expanded in natural order (``s2`` before ``s10``)."""
+    if not series:
+        return None
+    import glob
+
+    files: list[str] = []
+    for name in series:
+        if any(ch in name for ch in "*?[") and not os.path.exists(name):
+            found = sorted(glob.glob(name), key=lambda f: [int(p) if p.isdigit() else p for p in re.split(r"(\d+)", f)])
+            if not found:
+                raise FileNotFoundError(f"no file matches {name!r}")
+            files += found
+        else:
+            files.append(name)
+    return files[0] if len(files) == 1 else files
 
 
 def _stats_line(values: Any, weights: Any = None) -> str:
@@ -620,7 +639,12 @@ def _parser() -> argparse.ArgumentParser:
     p_anim.add_argument("--orbit", type=int, metavar="N", help="N frames of an orbit about the view up")
     p_anim.add_argument("--degrees", type=float, default=360.0, help="orbit sweep in degrees (default 360)")
     p_anim.add_argument("--time-series", nargs="+", metavar="FILE",
-                        help="one mesh file per time step, or one XDMF time series")
+                        help="one mesh file per time step (or a quoted glob pattern: 'run/step_*.vtu'), "
+                             "one .pvd collection, or one XDMF time series")
+    p_anim.add_argument("--scheduler", metavar="ADDRESS",
+                        help="render the time steps on a Dask cluster: a scheduler address (tcp://host:8786), "
+                             "or 'local' for a LocalCluster on this machine's cores (default: $TETVR_SCHEDULER if "
+                             "set, else here, one frame after another); needs pip install \"tetvr[dask]\"")
     p_anim.add_argument("--fps", type=float, default=12.0, help="frames per second of a video (default 12)")
     p_anim.add_argument("--no-progress", action="store_true", help="no progress bar")
     p_anim.add_argument("-o", "--output", default="frames",

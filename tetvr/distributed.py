@@ -131,8 +131,10 @@ def worker_renderer(settings: RenderSettings | None = None) -> Any:
 
 # ---- time series ----
 
-# A step: a mesh, a mesh file, or (a .pvd, a step index).
-Source = Union[TetMesh, str, tuple[str, int]]
+# A step: a mesh, a mesh file, (a .pvd, a step index) or ("xdmf", an XDMF file, a step index).
+Source = Union[TetMesh, str, tuple[str, int], tuple[str, str, int]]
+_XDMF = (".xdmf", ".xmf")
+_GLOB = ("*", "?", "[")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -143,11 +145,23 @@ class _Step:
 
 def series_sources(steps: Any) -> list[_Step]:
     """The steps of a series: a ``.pvd`` path or :class:`~tetvr.collections.Collection`
-    (its times), or a sequence of meshes or mesh files (time = index)."""
+    (its times), an XDMF time series (its times), a glob pattern (``"run/step_*.vtu"``,
+    the files in natural order: ``s2`` before ``s10``), or a sequence of meshes or mesh
+    files (time = index). Only the collection's own file is read here, never a mesh."""
     from .collections import Collection, read_pvd
 
-    if isinstance(steps, (str, os.PathLike)) and os.fspath(steps).lower().endswith(".pvd"):
-        steps = read_pvd(steps)
+    if isinstance(steps, (str, os.PathLike)):
+        name = os.fspath(steps)
+        if name.lower().endswith(".pvd"):
+            steps = read_pvd(name)
+        elif name.lower().endswith(_XDMF):
+            return [_Step(("xdmf", os.path.abspath(name), k), t) for k, t in enumerate(_xdmf_times(name))]
+        elif any(ch in name for ch in _GLOB) and not os.path.exists(name):
+            import glob
+
+            steps = sorted(glob.glob(name), key=_natural_key)
+            if not steps:
+                raise FileNotFoundError(f"no file matches {name!r}")
     if isinstance(steps, Collection):
         return [_Step((steps.path, i), t) for i, t in enumerate(steps.times)]
     if isinstance(steps, (str, os.PathLike, TetMesh)):
@@ -162,12 +176,46 @@ def series_sources(steps: Any) -> list[_Step]:
     return out
 
 
+def _natural_key(name: str) -> list[Any]:
+    import re
+
+    return [int(p) if p.isdigit() else p for p in re.split(r"(\d+)", name)]
+
+
+def _xdmf_times(path: str) -> list[float]:
+    """The time values of an XDMF time series (its XML only, no data)."""
+    import meshio
+
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"time series not found: {path}")
+    reader = meshio.xdmf.TimeSeriesReader(path)
+    times = []
+    for k, grid in enumerate(reader.collection):
+        t = grid.find("Time")
+        times.append(float(t.get("Value")) if t is not None and t.get("Value") is not None else float(k))
+    return times
+
+
+def _read_xdmf_step(path: str, k: int, scalars: str | None, component: int | None) -> TetMesh:
+    """Step ``k`` of an XDMF time series, as :func:`tetvr.animate.read_time_series` reads it."""
+    import itertools
+    from pathlib import Path
+
+    from .animate import _read_xdmf_series
+
+    # Through the serial reader, so a frame is the same bits as the serial path's; the
+    # steps before k cost one field array each (the geometry is read once).
+    return next(itertools.islice(_read_xdmf_series(Path(path), scalars, component), k, None))[1]
+
+
 def _load(source: Source, scalars: str | None, component: int | None) -> TetMesh:
     from .collections import read_step
     from .mesh import read
 
     if isinstance(source, TetMesh):
         return source
+    if isinstance(source, tuple) and source[0] == "xdmf":
+        return _read_xdmf_step(source[1], int(source[2]), scalars, component)
     if isinstance(source, tuple):
         return read_step(source[0], source[1], scalars, component=component)
     return read(source, scalars, component=component)
@@ -538,3 +586,26 @@ def render_pieces(
             return bricks.render(camera, tf, size=size, settings=settings)
         finally:
             bricks.release()
+
+
+def animate_series(scene: Any, steps: Any, out: str | os.PathLike[str], *, client: Any = None, fps: float = 12.0,
+                   size: tuple[int, int] | None = None, progress: bool = True) -> list[Any]:
+    """``tetvr animate``'s time series on a Dask cluster: every step of ``steps`` (see
+    :func:`series_sources`) with the scene's camera, transfer function and settings, as
+    PNG frames ``out/frame_0000.png``, ... written on the workers, atomically, or as one
+    video (the frames gathered here, in order). Returns the files written."""
+    from pathlib import Path
+
+    from .animate import VIDEO_SUFFIXES, write_frames
+
+    out = Path(out)
+    kw = dict(camera=scene.camera, tf=scene.tf, size=tuple(size or scene.size), settings=scene.settings,
+              scalars=scene.scalars, component=scene.component, client=client, progress=progress)
+    if out.suffix.lower() in VIDEO_SUFFIXES:
+        return write_frames(render_series(steps, **kw), out, background=scene.background, fps=fps)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{out} exists and is not a folder; give a folder for PNG frames or a video file "
+                         f"({', '.join(VIDEO_SUFFIXES)})")
+    out.mkdir(parents=True, exist_ok=True)
+    names = render_series(steps, output=str(out / "frame_{index:04d}.png"), background=scene.background, **kw)
+    return [Path(n) for n in names]
