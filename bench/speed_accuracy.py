@@ -70,6 +70,7 @@ def variants() -> dict[str, RenderSettings]:
     v["premultiplied table, cubic"] = dataclasses.replace(DEFAULT, table_encoding="premultiplied", table_filter="cubic")
     v["uint8 framebuffer"] = dataclasses.replace(DEFAULT, framebuffer="uint8")
     v["uniform table nodes"] = dataclasses.replace(DEFAULT, table_align_nodes=False)
+    v["even table nodes (table_warp off)"] = dataclasses.replace(DEFAULT, table_warp="off")
     v["fixed table N=256, K=16 (the 0.x default)"] = dataclasses.replace(
         DEFAULT, table_scalar_bins=256, table_thickness_slices=16, table_log_base=1.6, table_align_nodes=False)
     # One axis fixed, the other left to the "auto" size.
@@ -111,6 +112,12 @@ def scenes(quick: bool):
         q30, q60 = ((q - lo) / (hi - lo) for q in np.quantile(mesh.scalars, [0.3, 0.6]))
         op = [(0, 0.02), (q30 - 0.03, 0.05), (q30, 0.9), (q30 + 0.03, 0.05), (q60, 0.3), (1, 0.9)]
         yield name, mesh, Camera.fit(mesh, direction=(-1.0, -0.5, -0.7), zoom=1.2), _tf(mesh, op, 20, "cool-to-warm")
+        # Isosurface-like: two opacity spikes 0.6 % of the range wide, nothing else (issue 22;
+        # the default warps its table's nodes to them, tetvr.tablewarp).
+        spikes = [(0, 0.0), (q30 - 0.003, 0.0), (q30, 0.9), (q30 + 0.003, 0.0), (q60 - 0.003, 0.0), (q60, 0.9),
+                  (q60 + 0.003, 0.0), (1, 0.0)]
+        yield f"{name}, spiky TF", mesh, Camera.fit(mesh, direction=(-1.0, -0.5, -0.7), zoom=1.2), \
+            _tf(mesh, spikes, 20, "cool-to-warm")
 
 
 def errors(img: np.ndarray, ref: np.ndarray) -> dict[str, float]:
