@@ -377,13 +377,25 @@ class SlowRenderer(RecordingRenderer):
 def test_preview_sizer_follows_the_measured_cost():
     from tetvr.widget_loop import PreviewSizer
 
+    full = (400, 300)
     s = PreviewSizer(budget_s=0.1, min_scale=0.1, max_growth=1.25)
-    s.observe(1.6, scale=1.0)  # a full frame of 1.6 s: a quarter of the side, 1/16 of the pixels
-    assert s.scale == pytest.approx(0.25) and s.size((400, 300)) == (100, 75)
-    s.observe(0.01, scale=0.25)  # a cheap preview: grows, but by 25 % at most
+    s.observe(1.6, size=full, full=full)  # 1.6 s for the full frame: 1/16 of the pixels
+    assert s.scale == pytest.approx(0.25) and s.size(full) == (100, 75)
+    s.observe(0.01, size=(100, 75), full=full)  # a cheap preview: grows, but by 25 % at most
     assert s.scale == pytest.approx(0.3125)
-    s.observe(100.0, scale=0.3125)
-    assert s.scale == 0.1  # never below min_scale
+    # Frames of 40 ms + 1 us a pixel: the fit finds both; the budget's 60 ms buy 60k pixels.
+    s = PreviewSizer(budget_s=0.1, min_scale=0.05, max_growth=10.0)
+    for w, h in [(400, 300), (200, 150), (100, 75), (300, 225)]:
+        s.observe(0.04 + 1e-6 * w * h, size=(w, h), full=full)
+    assert s.overhead_s == pytest.approx(0.04) and s.per_pixel_s == pytest.approx(1e-6)
+    assert s.size(full)[0] * s.size(full)[1] == pytest.approx(60_000, rel=0.01)
+    # The overhead alone is over the budget: no smaller than the pixels the overhead costs.
+    s = PreviewSizer(budget_s=0.05, min_scale=0.05, max_growth=10.0)
+    for w, h in [(400, 300), (200, 150), (100, 75)]:
+        s.observe(0.08 + 1e-6 * w * h, size=(w, h), full=full)
+    assert s.size(full)[0] * s.size(full)[1] == pytest.approx(80_000, rel=0.01)
+    s.observe(100.0, size=full, full=full)
+    assert s.scale >= 0.05  # never below min_scale
     with pytest.raises(ValueError, match="budget_s"):
         PreviewSizer(budget_s=0.0)
 
@@ -601,14 +613,14 @@ def test_closing_the_widget_stops_the_loop_and_frees_gl(tmp_path):
     pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
     from tetvr.widget import Viewer
 
-    v = Viewer(tetvr.demo_scene_path(), size=(48, 36))
+    v = Viewer(tetvr.demo_scene_path(), size=(48, 36))  # the renderer in its own process
     assert v.loop.wait_idle(60)
     assert v.loop.last_frame.error is None, v.loop.last_error
     renderer = v.model.renderer
-    assert renderer.gpu_bytes() > 0
+    assert renderer.gpu_bytes() > 0 and renderer.alive
     v.canvas.close()  # what the front end's close does
     assert v.closed and v.loop.closed and not v.loop._thread.is_alive()
-    assert renderer._released and v.model._renderer is None
+    assert not renderer.alive and v.model._renderer is None
     assert v.canvas.comm is None and v.hist.comm is None
 
 
@@ -623,3 +635,27 @@ def test_view_without_a_display_says_so(tmp_path, monkeypatch, capsys):
     assert main(["view", str(tmp_path / "scene.json")]) == 3
     err = capsys.readouterr().err
     assert "no display" in err and "DISPLAY" in err
+
+
+@pytest.mark.gl
+def test_process_renderer_draws_what_the_renderer_draws_and_reports_its_errors():
+    from tetvr.gl import Renderer
+    from tetvr.widget_process import ProcessRenderer, RenderProcessError
+
+    scene = tetvr.load_scene(tetvr.demo_scene_path())
+    cams = [scene.camera, OrbitControl(scene.camera).azimuth(40.0)]
+    with Renderer(scene.settings) as local, ProcessRenderer(scene.settings) as remote:
+        for cam in cams:  # the mesh crosses the pipe once, then only the view
+            want = local.render(scene.mesh, cam, scene.tf, size=(40, 30))
+            got = remote.render(scene.mesh, cam, scene.tf, size=(40, 30))
+            assert got.dtype == np.float32 and np.array_equal(got, want)
+        assert remote.gpu_bytes() > 0
+        with pytest.raises(RenderProcessError, match="ValueError: .*size"):
+            remote.render(scene.mesh, cams[0], scene.tf, size=(0, 30))
+        assert remote.alive  # an error in a frame keeps the process
+        proc = remote._proc
+    assert proc.poll() is not None and not remote.alive  # released: the process (and its GL) is gone
+    with pytest.raises(RenderProcessError, match="released"):
+        remote.render(scene.mesh, cams[0], scene.tf, size=(40, 30))
+    with pytest.raises(TypeError, match="RenderSettings"):
+        ProcessRenderer({"method": "auto"})

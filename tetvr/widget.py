@@ -335,15 +335,19 @@ class ViewerModel:
     scene : the scene to show: a :class:`Scene`, a scene or mesh file, or a :class:`TetMesh`
         (:func:`scene_of`); its size is the full frame's size.
     renderer : anything with ``render(mesh, camera, tf, size=, order=)`` (default: a
-        :class:`tetvr.gl.Renderer` made on the first frame and released by :meth:`close`).
+        :class:`tetvr.gl.Renderer` made on the first frame and released by :meth:`close`;
+        ``"process"``: the same in a child process, :class:`tetvr.widget_process.ProcessRenderer`).
     preview_scale, settle_s : see :class:`ProgressiveRefiner`.
     clock : the time source (tests pass a fake one).
     """
 
     def __init__(self, scene: Scene | TetMesh | str | os.PathLike[str], *, renderer: Any = None, preview_scale: float = 0.5,
                  settle_s: float = 0.3, clock: Callable[[], float] = time.monotonic) -> None:
-        self._renderer = renderer
-        self._own_renderer = renderer is None
+        if isinstance(renderer, str) and renderer != "process":
+            raise ValueError(f"renderer must be None, 'process' or a renderer object, got {renderer!r}")
+        self._in_process = renderer == "process"
+        self._renderer = None if self._in_process else renderer
+        self._own_renderer = self._renderer is None
         self.clock = clock
         self.preview_scale = preview_scale
         self.settle_s = settle_s
@@ -424,9 +428,14 @@ class ViewerModel:
     @property
     def renderer(self) -> Any:
         if self._renderer is None:
-            from .gl.renderer import Renderer
+            if self._in_process:
+                from .widget_process import ProcessRenderer
 
-            self._renderer = Renderer(self.settings)
+                self._renderer = ProcessRenderer(self.settings)
+            else:
+                from .gl.renderer import Renderer
+
+                self._renderer = Renderer(self.settings)
         return self._renderer
 
     def render(self, request: RenderRequest) -> NDArray[np.float32]:

@@ -85,8 +85,11 @@ class Viewer:
     settle_s : quiet time after the last input before the full frame is drawn.
     preview_budget_s : the render time previews aim for; their size follows the measured
         cost of the frames before.
-    renderer : anything with ``render(mesh, camera, tf, size=, order=)`` (default: a
-        :class:`tetvr.gl.Renderer` made and used by the render loop's thread).
+    renderer : anything with ``render(mesh, camera, tf, size=, order=)``; by default
+        (``"process"``) a :class:`tetvr.gl.Renderer` in a child process
+        (:mod:`tetvr.widget_process`: moderngl holds the interpreter lock while it draws,
+        which would stop the kernel's input and output for the length of each frame);
+        ``None``: one in the kernel's process. Either is driven by the render loop only.
 
     :meth:`close` stops the loop and frees the GL memory; closing the widget calls it.
 
@@ -98,7 +101,7 @@ class Viewer:
 
     def __init__(self, scene: Scene | TetMesh | str | os.PathLike[str], *, size: tuple[int, int] | None = None,
                  settle_s: float = 0.25, preview_budget_s: float = 0.06, step_degrees: float = 15.0,
-                 renderer: Any = None) -> None:
+                 renderer: Any = "process") -> None:
         from .widget import scene_of
 
         self.model = ViewerModel(scene_of(scene, size=size), renderer=renderer, settle_s=settle_s)

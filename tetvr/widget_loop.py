@@ -55,24 +55,26 @@ class Frame:
 
 
 class PreviewSizer:
-    """The preview scale from the measured cost of the last frames.
+    """The preview size from the measured cost of the last frames.
 
-    A frame's time is taken as proportional to its pixel count (the projected
-    tetrahedra's per-tet work is spread over the draw, the ray caster's is per pixel).
-    After each frame the scale whose predicted time meets ``budget_s`` is
-    ``scale * sqrt(budget_s / seconds)``; growth is limited to ``max_growth`` a frame so
-    that one lucky frame cannot make the next preview slow.
+    A frame's time is modelled as ``overhead + per_pixel * pixels``, fitted (least
+    squares) to the last ``window`` frames: the projected tetrahedra's per-tet work and a
+    frame's fixed costs (transfer, setup) do not shrink with the image, the ray caster's
+    marching does. The preview gets the pixels whose predicted time meets ``budget_s``;
+    where the overhead alone is about the budget, shrinking further buys nothing, and the
+    preview keeps as many pixels as the overhead costs. Growth is limited to
+    ``max_growth`` (in side length) a frame, so one lucky frame cannot make the next slow.
 
     Examples
     --------
     >>> s = PreviewSizer(budget_s=0.1, min_scale=0.1)
-    >>> s.observe(1.0, scale=1.0)                  # a full frame took 1 s
-    >>> round(s.scale, 3)                          # -> a preview of ~1/10 the pixels
-    0.316
+    >>> s.observe(1.0, size=(400, 300), full=(400, 300))  # a full frame took 1 s
+    >>> s.size((400, 300))                                  # -> ~1/10 the pixels
+    (126, 95)
     """
 
     def __init__(self, *, budget_s: float = 0.06, min_scale: float = 0.125, max_scale: float = 1.0,
-                 max_growth: float = 1.25) -> None:
+                 max_growth: float = 1.25, window: int = 8) -> None:
         if not (math.isfinite(budget_s) and budget_s > 0):
             raise ValueError(f"budget_s must be positive, got {budget_s!r}")
         if not (0 < min_scale <= max_scale <= 1):
@@ -81,15 +83,32 @@ class PreviewSizer:
         self.min_scale = float(min_scale)
         self.max_scale = float(max_scale)
         self.max_growth = float(max_growth)
+        self.window = int(window)
+        self.samples: list[tuple[float, float]] = []  # (pixels, seconds)
         self.scale = 0.5
+        self.overhead_s = 0.0
+        self.per_pixel_s = 0.0
 
-    def observe(self, seconds: float, *, scale: float) -> None:
-        """A frame drawn at ``scale`` of the full size took ``seconds``."""
+    def _fit(self) -> tuple[float, float]:
+        px = np.array([p for p, _ in self.samples])
+        t = np.array([s for _, s in self.samples])
+        if np.ptp(px) > 0.1 * px.max():
+            k, c = np.polyfit(px, t, 1)
+            if k > 0 and c >= 0:
+                return float(c), float(k)
+        # One size only, or a fit the noise bent: all of the time is per pixel.
+        return 0.0, float(np.median(t / px))
+
+    def observe(self, seconds: float, *, size: tuple[int, int], full: tuple[int, int]) -> None:
+        """A frame of ``size`` pixels took ``seconds``; ``full`` is the full frame's size."""
         if not (seconds > 0 and math.isfinite(seconds)):
             return
-        want = float(scale) * math.sqrt(self.budget_s / seconds)
-        want = min(want, self.scale * self.max_growth) if scale < 1.0 else want
-        self.scale = float(np.clip(want, self.min_scale, self.max_scale))
+        self.samples = (self.samples + [(float(size[0] * size[1]), float(seconds))])[-self.window:]
+        c, k = self._fit()
+        self.overhead_s, self.per_pixel_s = c, k
+        target_px = (self.budget_s - c) / k if self.budget_s > 2 * c else c / k
+        want = math.sqrt(max(target_px, 1.0) / float(full[0] * full[1]))
+        self.scale = float(np.clip(min(want, self.scale * self.max_growth), self.min_scale, self.max_scale))
 
     def size(self, full: tuple[int, int]) -> tuple[int, int]:
         """The preview size for a full frame of ``full`` pixels (aspect kept)."""
@@ -268,7 +287,7 @@ class RenderLoop:
                 self.last_error = traceback.format_exc()
             seconds = time.perf_counter() - t0
             if error is None:
-                self.sizer.observe(seconds, scale=request.size[0] / max(self.model.size[0], 1))
+                self.sizer.observe(seconds, size=request.size, full=tuple(self.model.size))
             frame = Frame(image, request.size, request.final, revision, seconds, wanted_at, error)
             with self._cond:
                 self._drawn = revision
