@@ -1,0 +1,300 @@
+"""Rendering on Dask: time series and sort-last bricks, measured against one process.
+
+Four parts, each written to ``<out>/distributed.json`` (and a chart, ``distributed.png``):
+
+* **series** -- S steps of a synthetic mesh written as ``.vtu`` files, each read and
+  rendered (256x256): a plain serial loop in this process against
+  :func:`tetvr.distributed.render_series` on a LocalCluster of 1 and of 2 workers,
+  alternated for R rounds (the best of each kept: on a shared machine the rounds differ);
+  frames compared bit for bit. Dask's own cost per frame: a trivial frame (one tet, 8x8)
+  through the same path, minus the same frame rendered here.
+* **composite** -- :func:`tetvr.bricks.composite_over` alone: ns per pixel per brick.
+* **bricks** -- a synthetic (rotated, so planes cut cells) cube of ~1M (and with
+  ``--tets 1e6,1e7`` ~10M) tets split into P = 1, 2, 4, 8 k-d bricks held by a fresh
+  2-worker cluster (:func:`tetvr.distributed.distribute_mesh`): the split's time on the
+  client, the first frame, the median time per view change (an orbit), and each worker's
+  peak resident memory (``ru_maxrss``, a fresh cluster per P).
+* **accuracy** -- the acceptance matrix: a grid cube, the interlocking rings (non-convex)
+  and bluntfin (when ``../shared`` has it), P = 2, 4, 8, perspective / parallel / inside,
+  both methods: the composite's max abs difference from the single-process image, and
+  its PSNR against the CPU reference minus the single image's.
+
+Ratios carry between machines; seconds are this machine's (llvmpipe; ``machine`` in the
+JSON says how many cores). The projection to 64 / 1,024 workers and 10^9 tets in
+bench/README.md is computed from these numbers by ``bench/doc_tables.py``.
+
+(This file is named like the ``distributed`` package: it takes its own folder off
+``sys.path`` before anything imports Dask.)
+
+Usage::
+
+    python bench/distributed.py [--quick] [--tets 1e6[,1e7]] [--rounds R] [--out bench/results]
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+_HERE = Path(__file__).resolve().parent
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]  # before "import distributed"
+sys.path.insert(0, str(_HERE.parent))
+
+import argparse  # noqa: E402
+import datetime as _dt  # noqa: E402
+import importlib.util  # noqa: E402
+import os  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+
+def _common():
+    spec = importlib.util.spec_from_file_location("_common", _HERE / "_common.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)  # type: ignore[union-attr]
+    return mod
+
+
+def _peak_rss_mib() -> float:
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
+
+
+def series(args: argparse.Namespace) -> dict:
+    import meshio
+
+    import tetvr
+    from tetvr import Camera, TransferFunction, synthetic
+    from tetvr.distributed import cluster_client, render_series
+    from tetvr.gl import Renderer
+
+    n_cube, n_steps, size = (12, 8, (128, 128)) if args.quick else (20, 16, (256, 256))
+    mesh = synthetic.cube(n_cube)
+    out: dict = {"mesh_tets": mesh.n_tets, "steps": n_steps, "size": list(size), "workers": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        files = []
+        for k in range(n_steps):
+            files.append(os.path.join(tmp, f"s{k}.vtu"))
+            meshio.Mesh(mesh.points, [("tetra", mesh.tets)], point_data={"f": mesh.scalars * (1 + 0.1 * k)}).write(
+                files[-1])
+        cam = Camera.fit(mesh)
+        tf = TransferFunction.preset("viridis", (mesh.scalar_range[0], mesh.scalar_range[1] * (1 + 0.1 * n_steps)),
+                                     unit_distance=0.1)
+        tiny = synthetic.single_tet()
+        tcam, ttf = Camera.fit(tiny), TransferFunction.preset("viridis", (0, 1))
+        with Renderer() as r:
+            r.render(tetvr.read(files[0]), cam, tf, size=size)
+            for n_workers in (1, 2):
+                rounds = []
+                with cluster_client(n_workers=n_workers) as c:
+                    c.wait_for_workers(n_workers)
+                    render_series(files[:n_workers], camera=cam, tf=tf, size=size, client=c, progress=False)  # warm-up
+                    for _ in range(args.rounds):
+                        t = time.perf_counter()
+                        serial = [r.render(tetvr.read(f), cam, tf, size=size) for f in files]
+                        t_serial = time.perf_counter() - t
+                        t = time.perf_counter()
+                        frames = render_series(files, camera=cam, tf=tf, size=size, client=c, progress=False)
+                        t_dask = time.perf_counter() - t
+                        t = time.perf_counter()
+                        for _ in range(32):
+                            r.render(tiny, tcam, ttf, size=(8, 8))
+                        t_tiny = time.perf_counter() - t
+                        t = time.perf_counter()
+                        render_series([tiny] * 32, camera=tcam, tf=ttf, size=(8, 8), client=c, progress=False)
+                        t_tiny_dask = time.perf_counter() - t
+                        rounds.append({"serial_s": t_serial, "dask_s": t_dask, "trivial32_serial_s": t_tiny,
+                                       "trivial32_dask_s": t_tiny_dask,
+                                       "identical": all(np.array_equal(a, b) for a, b in zip(frames, serial))})
+                        print(f"series, {n_workers} worker(s): serial {t_serial:.2f} s, Dask {t_dask:.2f} s; "
+                              f"trivial x32 {t_tiny:.3f} / {t_tiny_dask:.3f} s", flush=True)
+                best_s, best_d = min(x["serial_s"] for x in rounds), min(x["dask_s"] for x in rounds)
+                out["workers"][str(n_workers)] = {
+                    "rounds": rounds, "serial_frames_per_s": n_steps / best_s, "dask_frames_per_s": n_steps / best_d,
+                    "speedup": best_s / best_d, "identical": all(x["identical"] for x in rounds),
+                    "dask_overhead_s_per_frame": (min(x["trivial32_dask_s"] for x in rounds)
+                                                  - min(x["trivial32_serial_s"] for x in rounds)) / 32}
+    return out
+
+
+def composite() -> dict:
+    from tetvr.bricks import composite_over
+
+    rng = np.random.default_rng(0)
+    out = {}
+    for p in (2, 4, 8):
+        imgs = [rng.random((512, 512, 4), dtype=np.float32) * 0.5 for _ in range(p)]
+        best = min(_timed(lambda: composite_over(imgs)) for _ in range(3))
+        out[str(p)] = {"ns_per_pixel_per_brick": best / (512 * 512 * p) * 1e9}
+    return out
+
+
+def _timed(fn) -> float:
+    t = time.perf_counter()
+    fn()
+    return time.perf_counter() - t
+
+
+def bricks(args: argparse.Namespace, n_tets: float) -> dict:
+    from tetvr import Camera, TransferFunction, synthetic
+    from tetvr.animate import orbit
+    from tetvr.bricks import kd_bricks
+    from tetvr.distributed import cluster_client, distribute_mesh
+
+    n = max(2, round((n_tets / 6) ** (1 / 3)))
+    mesh = synthetic.cube(n)
+    size = (256, 256) if args.quick else (512, 512)
+    lo, hi = mesh.scalar_range
+    tf = TransferFunction.preset("viridis", (lo, hi), opacity=0.5, unit_distance=0.2)
+    views = orbit(Camera.fit(mesh), 4, degrees=40.0)
+    out: dict = {"n_tets": mesh.n_tets, "size": list(size), "workers": 2, "P": {}}
+    for p in (1, 2, 4, 8):
+        t = time.perf_counter()
+        tree = kd_bricks(mesh, p)
+        t_split = time.perf_counter() - t
+        with cluster_client(n_workers=2) as c:
+            c.wait_for_workers(2)
+            base = c.run(_peak_rss_mib)
+            t = time.perf_counter()
+            b = distribute_mesh(mesh, p, c, tree=tree)
+            c.gather(list(b.futures.values()))
+            t_send = time.perf_counter() - t
+            t = time.perf_counter()
+            b.render(views[0], tf, size=size)
+            t_first = time.perf_counter() - t
+            times = []
+            for cam in views[1:]:
+                t = time.perf_counter()
+                b.render(cam, tf, size=size)
+                times.append(time.perf_counter() - t)
+            peaks = c.run(_peak_rss_mib)
+            method = b.settings_for(__import__("tetvr").RenderSettings(), views[1], size).method
+            b.release()
+        out["P"][str(p)] = {"split_s": t_split, "send_s": t_send, "first_frame_s": t_first,
+                            "view_change_median_s": float(np.median(times)), "view_change_s": times,
+                            "cells_cut": tree.n_cut, "brick_tets": [len(x.tets) for x in tree.bricks()],
+                            "worker_peak_rss_mib": sorted(peaks.values()),
+                            "worker_start_rss_mib": sorted(base.values()), "method": method}
+        print(f"bricks {mesh.n_tets:,} tets, P={p}: split {t_split:.2f} s, first {t_first:.2f} s, view change "
+              f"{np.median(times):.2f} s, worker peak {max(peaks.values()):.0f} MiB ({method})", flush=True)
+    return out
+
+
+def accuracy(args: argparse.Namespace) -> dict:
+    from tetvr import Camera, RenderSettings, TransferFunction, synthetic
+    from tetvr.distributed import cluster_client, distribute_mesh
+    from tetvr.bricks import kd_bricks
+    from tetvr.gl import Renderer
+    from tetvr.image import psnr
+    from tetvr.reference import render_reference
+
+    common = _common()
+    meshes = {"cube (grid)": lambda: synthetic.cube(6, rotate=False), "interlocking rings": synthetic.interlocking_rings}
+    if (common.TETS_DATA / "bluntfin_tets.vtu").is_file():
+        meshes["bluntfin"] = lambda: common.load_quiet(common.TETS_DATA / "bluntfin_tets.vtu", "Density")
+    size = (64, 64)
+    out: dict = {"size": list(size), "cases": []}
+    with cluster_client(n_workers=2) as c:
+        for name, make in meshes.items():
+            mesh = make()
+            b = mesh.bounds
+            diag = float(np.linalg.norm(b[1] - b[0]))
+            tf = TransferFunction.preset("viridis", mesh.scalar_range, opacity=[(0, 0.3), (0.6, 0.9), (1, 0.5)],
+                                         unit_distance=0.2 * diag)
+            eye = b.mean(axis=0) + (0.13, 0.07, 0.21) * (b[1] - b[0]) / 1.5
+            views = {"perspective": Camera.fit(mesh, direction=(-1.0, -0.35, -0.25), zoom=1.2),
+                     "parallel": Camera.fit(mesh, direction=(-1.0, -0.35, -0.25), zoom=1.2, parallel=True),
+                     "inside": Camera(position=tuple(eye), focal_point=tuple(eye - (0.4, 0.2, 0.3)), view_angle=70.0,
+                                      clipping_range=(0.005 * diag, 5 * diag))}
+            refs = {v: render_reference(mesh, cam, tf, size) for v, cam in views.items()}
+            for method in ("auto", "projected"):
+                settings = RenderSettings(method=method)
+                with Renderer(settings) as r:
+                    wholes = {v: r.render(mesh, cam, tf, size=size) for v, cam in views.items()}
+                for p in (2, 4, 8):
+                    tree = kd_bricks(mesh, p)
+                    bricks = distribute_mesh(mesh, p, c, tree=tree)
+                    for v, cam in views.items():
+                        img = bricks.render(cam, tf, size=size, settings=settings)
+                        out["cases"].append({
+                            "mesh": name, "n_tets": mesh.n_tets, "P": p, "view": v, "method": method,
+                            "resolved": bricks.settings_for(settings, cam, size).method, "cells_cut": tree.n_cut,
+                            "max_abs_diff": float(np.abs(img - wholes[v]).max()),
+                            "whole_max_err_vs_ref": float(np.abs(wholes[v] - refs[v]).max()),
+                            "psnr_whole": psnr(wholes[v], refs[v]), "psnr_bricks": psnr(img, refs[v])})
+                    bricks.release()
+                    worst = max((x for x in out["cases"] if x["mesh"] == name and x["P"] == p
+                                 and x["method"] == method), key=lambda x: x["max_abs_diff"])
+                    print(f"accuracy {name} {method} P={p}: max diff {worst['max_abs_diff']:.1e}", flush=True)
+    return out
+
+
+def chart(result: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 3, figsize=(13, 3.8))
+    s = result["series"]["workers"]
+    labels = ["serial"] + [f"Dask, {k} worker{'s' if k != '1' else ''}" for k in s]
+    fps = [s["1"]["serial_frames_per_s"]] + [v["dask_frames_per_s"] for v in s.values()]
+    ax[0].bar(labels, fps, color=["#888", "#3b75af", "#2a9d8f"][:len(fps)])
+    ax[0].set_ylabel("frames / s")
+    ax[0].set_title(f"time series ({result['series']['mesh_tets']:,} tets per step)")
+    for res in result["bricks"]:
+        ps = sorted(res["P"], key=int)
+        ax[1].plot([int(p) for p in ps], [res["P"][p]["view_change_median_s"] for p in ps], "o-",
+                   label=f"{res['n_tets'] / 1e6:.1f}M tets")
+        ax[2].plot([int(p) for p in ps], [max(res["P"][p]["worker_peak_rss_mib"]) for p in ps], "o-",
+                   label=f"{res['n_tets'] / 1e6:.1f}M tets")
+    for a, title, unit in ((ax[1], "bricks: time per view change", "s"),
+                           (ax[2], "bricks: peak memory per worker", "MiB")):
+        a.set_xscale("log", base=2)
+        a.set_xticks([1, 2, 4, 8], ["1", "2", "4", "8"])
+        a.set_xlabel("bricks P (2 workers)")
+        a.set_ylabel(unit)
+        a.set_title(title)
+        a.legend()
+    fig.suptitle(f"tetvr on Dask ({result['machine'].get('cpu_count', '?')} cores, {result['date'][:10]})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smaller series and images")
+    ap.add_argument("--tets", default="1e6", help="brick mesh sizes, comma separated (default 1e6; add 1e7)")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--only", default="series,composite,bricks,accuracy", help="parts to run")
+    ap.add_argument("--out", default=str(_HERE / "results"))
+    args = ap.parse_args()
+    common = _common()
+    path = Path(args.out) / "distributed.json"
+    result: dict = {}
+    if path.is_file():  # parts not run this time keep their last numbers
+        import json
+
+        result = json.loads(path.read_text())
+    result.update({"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                   "machine": common.machine()})
+    only = args.only.split(",")
+    if "series" in only:
+        result["series"] = series(args)
+    if "composite" in only:
+        result["composite"] = composite()
+    if "bricks" in only:
+        result["bricks"] = [bricks(args, float(x)) for x in args.tets.split(",")]
+    if "accuracy" in only:
+        result["accuracy"] = accuracy(args)
+    common.write_json(path, result)
+    if all(k in result for k in ("series", "bricks")):
+        chart(result, path.with_suffix(".png"))
+    print(f"-> {path}")
+
+
+if __name__ == "__main__":
+    main()
