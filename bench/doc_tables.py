@@ -20,7 +20,7 @@ from typing import Any, Callable
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results"
 #: Files whose table blocks this script owns.
-DOCS = (ROOT / "README.md", ROOT / "bench" / "README.md", ROOT / "docs" / "methods.md")
+DOCS = (ROOT / "README.md", ROOT / "bench" / "README.md", ROOT / "docs" / "methods.md", ROOT / "docs" / "limits.md")
 
 
 def _load(name: str) -> dict[str, Any]:
@@ -69,7 +69,25 @@ def raymarch_stages() -> str:
             f"({r['timestamp']}, `bench/results/stages.json`).\n\n" + "\n".join(rows))
 
 
-TABLES: dict[str, Callable[[], str]] = {"methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages}
+def spiky_tf() -> str:
+    """Isosurface-like transfer functions: even against warped tables (bench/spiky_tf.py)."""
+    r = _load("spiky_tf.json")
+    rows = ["| scene | method | transfer function | table nodes | N | PSNR (dB) | max error | pixels > 1/255 | frame (ms) "
+            "| frame / smooth TF's |", "|---|---|---|---|---:|---:|---:|---:|---:|---:|"]
+    for row in r["rows"]:
+        t = row["table"]
+        nodes = "warped" if t["warp"] else "even"
+        label = "defaults" if row["table_warp"] == "auto" else 'table_warp="off"'
+        rows.append(f"| {row['scene']} | {row['method']} | {row['tf']} | {nodes} ({label}) | {t['n_bins']} "
+                    f"| {row['psnr']:.1f} | {row['max_error']:.4f} | {row['pixels_over_1_255']} "
+                    f"| {row['frame_s'] * 1e3:.0f} | {row['frame_vs_smooth']:.2f} |")
+    return (f"Measured by `bench/spiky_tf.py` at {r['size'][0]}x{r['size'][1]} against the CPU reference "
+            f"({r['created']}, `bench/results/spiky_tf.json`; frame: process CPU time per view change, "
+            "median of 3).\n\n" + "\n".join(rows))
+
+
+TABLES: dict[str, Callable[[], str]] = {"methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages,
+                                        "spiky_tf": spiky_tf}
 _BLOCK = re.compile(r"(<!-- table:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /table:(?P=name) -->)", re.S)
 
 
