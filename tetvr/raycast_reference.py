@@ -104,7 +104,8 @@ class RaycastSettings:
         same): sized from the smallest voxel spacing and, for emission-absorption, the
         transfer function's opacity (:func:`tetvr.raycast_size.auto_step`).
     termination : stop a ray once its alpha reaches this (early ray termination); 1.0
-        disables it. The error it allows is at most ``1 - termination`` per pixel.
+        disables it. The error it allows is at most ``1 - termination`` per pixel: the
+        default 0.998 keeps it below half an 8-bit step (0.99 cost the CT head 20 dB).
     jitter : offset every ray's first sample by a random fraction of a step (seeded by
         ``seed`` and the pixel, so images are reproducible); trades wood-grain artefacts
         for noise. The integrated interval is unchanged.
@@ -139,7 +140,7 @@ class RaycastSettings:
 
     mode: Literal["emission_absorption", "mip", "xray", "isosurface"] = "emission_absorption"
     step: float | Literal["auto"] | None = "auto"
-    termination: float = 0.99
+    termination: float = 0.998
     jitter: bool = False
     seed: int = 0
     iso_value: float | None = None
