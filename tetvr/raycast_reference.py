@@ -13,17 +13,20 @@ computes the same image the slow, exact way:
    box may be oriented by the direction matrix), to the camera's clipping range, to an
    optional world clip box, and to the caller's per-pixel limits ``[t_start, t_end]``.
 2. The remaining interval is cut into pieces no longer than ``fine_step`` (world units;
-   default 1/8 of the smallest voxel spacing) and the volume is sampled at their
-   ends, trilinearly (or with the cubic B-spline, as the settings say).
+   default 1/8 of the smallest voxel spacing), and also where the ray crosses a
+   voxel-index plane, so that every piece lies inside one voxel cell; the volume is
+   sampled at the pieces' ends, trilinearly (or with the cubic B-spline, as the settings say).
 3. The scalar is taken as linear on each piece; every piece is cut at the transfer
    function's breakpoints and integrated exactly by
    :func:`tetvr.reference.integrate_segments` (closed-form optical depth, colour to
    ~1e-7), then composited front to back.
 
-What remains is the linearisation of the trilinear field (a cubic along a ray) over one
-fine piece: ``|ds| <= h^2/8 max|s''|`` with ``h`` = 1/8 voxel, ~2e-3 of the steepest
-voxel-to-voxel difference. The other modes use the same samples: ``mip`` the largest
-(and the two ends), ``xray`` the length-weighted mean (trapezoid rule), ``isosurface``
+What remains is the linearisation of the trilinear field (a smooth cubic along a ray
+inside one cell) over one fine piece: ``|ds| <= h^2/8 max|s''|`` with ``h`` = 1/8 voxel
+(without the cuts at the voxel planes a piece across a cell face errs by ``h/4`` times
+the jump in slope there, first order in ``h``). The other modes use the same samples:
+``mip`` the largest (exact where the ray passes through a voxel-centred peak: it crosses
+the voxel's three planes there), ``xray`` the length-weighted mean (trapezoid rule), ``isosurface``
 the first sign change of ``s - iso``, refined by bisection on the trilinear field and
 shaded with Blinn–Phong from central-difference gradients, as the shader does.
 

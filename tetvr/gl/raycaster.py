@@ -1,13 +1,17 @@
 """The GPU volume ray caster: one object owns every GL object it makes.
 
-Per volume (once): the voxels go to a 3D texture, in their own precision (8/16-bit
-normalized or 32-bit float; never squeezed to 8 bits), downsampled with a warning when
-an axis exceeds the GPU's largest 3D texture. Per transfer function and step (once): the
-pre-integration table (:func:`tetvr.preintegrate.table_for`, whose top thickness slice is
-the step, so full steps are exact table entries and the partial steps at the ends of a
-ray read the thinner slices) and a 1D transfer-function texture. Per frame: the optional
-per-pixel ray limits go to a texture, one full-screen triangle runs ``raycast.frag``,
-and the RGBA32F target is read back.
+Per volume (once): the voxels go to a 3D texture at the precision the accuracy needs
+(16-bit normalized for 8- and 16-bit data: an 8-bit texture is filtered at 8-bit
+precision; 32-bit float otherwise), checked against the GL's and the host's memory before
+it is made, and downsampled with a warning when an axis exceeds the GPU's largest 3D
+texture. Per transfer function and step (once), for emission-absorption: either the
+control points (``integration="exact"``: ``raycast_exact.glsl`` cuts each piece at them
+and integrates in closed form) or the pre-integration table
+(:func:`tetvr.preintegrate.table_for` with aligned nodes, whose top thickness slice is the
+step; refused before it is built when the GL or the memory cannot hold it); "auto" picks
+(:mod:`tetvr.raycast_size`), and a 1D transfer-function texture for the other modes. Per
+frame: the optional per-pixel ray limits go to a texture, one full-screen triangle runs
+``raycast.frag``, and the RGBA32F target is read back.
 
 Modes are a table (:data:`MODES`): each maps to the ``RAYCAST_MODE`` define; every mode
 writes its final pixel from the shader, so none needs blending.
