@@ -580,46 +580,49 @@ def _fill_runs_uneven(rgb: NDArray[np.float64], color: NDArray[np.float64], tau_
                       width: NDArray[np.float64], thick: NDArray[np.floating[Any]]) -> None:
     """:func:`_fill_runs` for nodes ``width`` apart (bin by bin, in any unit): ``rgb[k, sf, sb]``.
 
-    A run from node i to node j crosses bin m in length ``thick[k] * width[m] / (x_j - x_i)``,
-    which differs from run to run, so no two runs share their bins' colours and the sliding
-    window of the even table does not apply: every run is composited front to back, bin by
-    bin, all runs at once (those still running at step s are a prefix, longest first). The
-    work is ~N^3 K / 3 bin steps instead of N^2 K, which is why warped tables have fewer nodes.
+    A run from node i to node j crosses bin m in length ``q * width[m]``, ``q = thick[k] /
+    (x_j - x_i)``, which differs from run to run, so no two runs share their bins' colours
+    and the sliding window of the even table does not apply. Instead, front node by front
+    node, every run's bins are weighed at once: bin m (colour c0 -> c1, optical depth
+    theta) behind transmittance T_m emits ``T_m c0 - T_{m+1} c1 + T_m phi(theta) (c1 - c0)``
+    (:func:`_fill_runs`' bin colour), so the colours of all runs from one front node are three
+    matrix products of those weights with the bins' colours. The work is ~N^3 K / 3
+    exponentials (N^2 K for the even table), which is why warped tables have fewer nodes.
+    (Transmittances are running products of the bins', as in the even recurrence.)
     """
     n_bins = color.shape[0]
     nb = n_bins - 1
-    # Runs (front i, length n), longest first: the runs still going at step s are the first ones.
-    lengths = np.repeat(np.arange(nb, 0, -1), np.arange(1, nb + 1))
-    fronts = np.concatenate([np.arange(nb - n + 1) for n in range(nb, 0, -1)])
-    going = np.cumsum(np.arange(1, nb + 1))  # runs longer than s, for s = 0 .. nb - 1
-    going = going[::-1]
     for forwards in (True, False):
         if forwards:
             c0, c1, w, taus = color[:-1], color[1:], width, tau_bin
         else:  # mirrored axis: node N-1-i, bins in reverse with their colours swapped
             c0, c1, w, taus = color[:0:-1], color[-2::-1], width[::-1], tau_bin[::-1]
         x = np.concatenate([[0.0], np.cumsum(w)])
-        per_width = thick[None, :] / (x[fronts + lengths] - x[fronts])[:, None]  # [run, k]: length per unit width
         tw = taus * w
+        depth = np.concatenate([[0.0], np.cumsum(tw)])  # optical depth per unit q up to each node
         dc = c1 - c0
-        acc = np.zeros((fronts.size, thick.shape[0], 3))
-        trans = np.ones((fronts.size, thick.shape[0]))
-        for step in range(nb):
-            c = going[step]
-            m = fronts[:c] + step
-            th = per_width[:c] * tw[m][:, None]
-            t = np.exp(-th)
+        for i in range(nb):
+            # Runs from node i to nodes i+1 .. N-1 (rows), bins i .. N-2 (columns).
+            q = thick[None, :] / (x[i + 1:] - x[i])[:, None]  # [run, k]: length per unit width
+            th = q[:, :, None] * tw[None, None, i:]  # [run, k, bin]: each bin's optical depth
+            e1 = np.expm1(-th)
             with np.errstate(invalid="ignore", divide="ignore"):
-                phi = np.where(th > 1e-12, -np.expm1(-th) / np.where(th > 0, th, 1.0), 1.0 - 0.5 * th)
-            e = c0[m][:, None, :] - c1[m][:, None, :] * t[..., None] + dc[m][:, None, :] * phi[..., None]
-            e *= (th > 0)[..., None]  # a transparent bin emits nothing (guards rounding)
-            acc[:c] += trans[:c, :, None] * e
-            trans[:c] *= t
-        np.maximum(acc, 0.0, out=acc)
-        front, back = fronts, fronts + lengths
-        if not forwards:
-            front, back = nb - front, nb - back
-        rgb[:, front, back, :] = acc.transpose(1, 0, 2)
+                phi = np.where(th > 1e-12, -e1 / np.where(th > 0, th, 1.0), 1.0 - 0.5 * th)
+            e1 += 1.0  # each bin's transmittance
+            # Transmittance after each bin, zero past the run's last bin (run r crosses bins 0 .. r).
+            after = np.cumprod(e1, axis=2)
+            after *= np.tri(nb - i)[:, None, :]
+            before = np.empty_like(after)
+            before[..., 0] = 1.0
+            before[..., 1:] = after[..., :-1]
+            before[..., 1:] *= np.tri(nb - i, k=-1)[:, None, 1:] + np.eye(nb - i)[:, None, 1:]
+            acc = before @ c0[i:] - after @ c1[i:] + (before * phi) @ dc[i:]  # [run, k, 3]
+            np.maximum(acc, 0.0, out=acc)
+            if forwards:
+                rgb[:, i, i + 1:, :] = acc.transpose(1, 0, 2)
+            else:
+                f = nb - i  # the front node on the unmirrored axis; sb runs f-1 .. 0
+                rgb[:, f, f - 1::-1, :] = acc.transpose(1, 0, 2)
 
 
 def _thin_limit(color: NDArray[np.float64], tau_bin: NDArray[np.float64], tau_node: NDArray[np.float64],
