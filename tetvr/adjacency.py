@@ -93,7 +93,7 @@ class FaceAdjacency:
 # Keyed on the identity of the (points, tets) arrays rather than on the mesh, so that
 # meshes that share geometry (``TetMesh.with_scalars``) share one adjacency. An entry is
 # dropped when either array is freed, before its id can be reused.
-_CACHE: dict[tuple[int, int], FaceAdjacency] = {}
+_CACHE: dict[tuple[int, int, bytes], FaceAdjacency] = {}
 _LOCK = threading.Lock()
 
 

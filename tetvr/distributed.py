@@ -11,31 +11,16 @@ a cluster or an HPC batch system (dask-jobqueue):
   :class:`~tetvr.gl.Renderer` that worker keeps for the run (:func:`worker_renderer`).
   The renderer is a pure function of (mesh, camera, transfer function, settings), so a
   frame is the same bits wherever it was rendered.
-* **Sort-last bricks** (:func:`render_bricks`; Molnar et al. 1994, "A sorting
-  classification of parallel rendering"): a k-d tree of axis-aligned planes splits the
-  mesh into bricks (:func:`kd_bricks`), each worker renders one brick to a premultiplied
-  float image with the shared camera, transfer function and table (each brick keeps the
-  whole mesh's points, so its float32 origin, scalar range and table are the whole's), and
-  the client composites them "over" in the tree's visibility order. Two bricks on either
-  side of a plane are crossed in the same order by every ray — the side of the plane the
-  eye is on first (in parallel projection: the side the view direction comes from) — so
-  the order is exact for any camera, inside the mesh included, as long as no cell reaches
-  across a plane.
+* **Sort-last bricks** (:func:`render_bricks`, :func:`render_pieces`; the bricks
+  themselves are :mod:`tetvr.bricks`): a k-d tree of axis-aligned planes splits the mesh
+  into bricks, each worker holds its bricks (:class:`ClusterBricks`) and renders them to
+  premultiplied float images with the shared camera, transfer function, table and float32
+  origin, and the client composites them "over" in the tree's visibility order.
+  A mesh held here is split here and its bricks sent (:func:`distribute_mesh`); a mesh in
+  solver pieces (a ``.pvtu``) is read and redistributed into bricks on the workers
+  (:func:`distribute_pieces`), the client holding only a sample of its cells.
 
-Where the composite is exact
-----------------------------
-:func:`kd_bricks` puts a plane where no cell straddles it when one lies near the median
-(a grid's face, a block boundary): the bricks hold the mesh's own cells, and the composite
-equals the single-process image to float32 rounding (measured <= 2.4e-7, both methods,
-``tests/test_distributed.py``). Elsewhere it cuts the straddling cells at the plane into
-conforming tets on either side (the field is linear on a tet, so the pieces carry it
-exactly): the CPU reference's composite then equals its whole image to float32 rounding,
-but the GPU's pre-integration table is looked up per segment, and a ray's segment cut in
-two is looked up twice, so the GPU composite differs from the GPU whole image by the
-table's own error (measured 2e-5..8e-5 on a rotated grid; as close to or closer to the
-reference than the whole image). Cells assigned to a side by centroid instead
-(``cut=False``) leave jagged boundaries that rays can cross back and forth: errors up to
-~0.1 (``docs/distributed.md``).
+Where the composite is exact, and what it costs: ``docs/distributed.md``.
 """
 
 from __future__ import annotations
@@ -214,10 +199,10 @@ def _load(source: Source, scalars: str | None, component: int | None) -> TetMesh
 
     if isinstance(source, TetMesh):
         return source
-    if isinstance(source, tuple) and source[0] == "xdmf":
-        return _read_xdmf_step(source[1], int(source[2]), scalars, component)
+    if isinstance(source, tuple) and len(source) == 3:
+        return _read_xdmf_step(str(source[1]), int(source[2]), scalars, component)
     if isinstance(source, tuple):
-        return read_step(source[0], source[1], scalars, component=component)
+        return read_step(str(source[0]), int(source[1]), scalars, component=component)
     return read(source, scalars, component=component)
 
 
@@ -375,7 +360,7 @@ class ClusterBricks:
             method = "projected"
         else:
             method = choose(settings, self._chooser, camera, size)
-        return dataclasses.replace(settings, method=method)
+        return dataclasses.replace(settings, method=method)  # type: ignore[arg-type]
 
     def render(self, camera: Camera, tf: TransferFunction, *, size: tuple[int, int] = (512, 512),
                settings: RenderSettings | None = None) -> NDArray[np.float32]:
