@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -353,6 +354,15 @@ def test_model_refined_frame_is_the_plain_render():
         final = model.final()
         want = tetvr.render(scene.mesh, camera=model.camera, tf=scene.tf, size=(96, 72))
         assert np.array_equal(final, want)
+        # A transfer-function edit's preview uses the small table; the full frame the full one.
+        model.editor.move_point(0, a=0.3)
+        tf = model.editor.transfer_function()
+        model.draw(model.mesh, model.camera, tf, RenderRequest((48, 36), sort=False, final=False), preview_table=True)
+        assert model.renderer.settings == model.preview_settings != model.settings
+        assert model.renderer.table(model.mesh, tf).data.shape[1] == 64
+        final = model.final()
+        assert model.renderer.settings == model.settings
+        assert np.array_equal(final, tetvr.render(scene.mesh, camera=model.camera, tf=tf, size=(96, 72)))
     finally:
         model.close()
 
@@ -408,9 +418,11 @@ def test_render_loop_draws_the_latest_state_and_drops_stale_ones(tmp_path):
     frames = []
     loop = RenderLoop(model, frames.append, settle_s=0.15, budget_s=0.01)
     try:
+        time.sleep(0.2)
+        assert rec.calls == []  # nothing is drawn before something is wanted
         loop.update(final=True)
         assert loop.wait_idle(10)
-        assert frames[-1].final and frames[-1].size == (80, 60)
+        assert len(frames) == 1 and frames[-1].final and frames[-1].size == (80, 60)  # drawn once
         n0, start = len(rec.calls), model.camera
         for _ in range(40):  # 40 inputs in ~0.2 s against 50 ms frames
             loop.update(lambda m: m.control.azimuth(1.0))
@@ -422,10 +434,40 @@ def test_render_loop_draws_the_latest_state_and_drops_stale_ones(tmp_path):
         # The full frame shows the latest state: all 40 degrees.
         assert drawn[-1]["camera"] == model.camera != start
         assert frames[-1].revision == loop.revision and frames[-1].wanted_at > 0
+        # The end of an input (mouse-up) asks for the full frame at once, not settle_s later.
+        loop.settle_s = 30.0
+        loop.update(lambda m: m.control.azimuth(1.0))
+        assert not loop.wait_idle(0.3)
+        loop.settle()
+        assert loop.wait_idle(10) and frames[-1].final and rec.calls[-1]["camera"] == model.camera
     finally:
         loop.close()
     with pytest.raises(RuntimeError, match="closed"):
         loop.update()
+
+
+def test_render_loop_previews_transfer_function_edits_with_the_small_table(tmp_path):
+    from tetvr.widget_loop import RenderLoop
+
+    model = ViewerModel(_scene(tmp_path), renderer=SlowRenderer(0.02))
+    seen = []
+    real = model.draw
+    model.draw = lambda *a, preview_table=False: seen.append((a[3].final, preview_table)) or real(
+        *a, preview_table=preview_table)
+    loop = RenderLoop(model, lambda f: None, settle_s=0.1)
+    try:
+        loop.update(final=True)
+        assert loop.wait_idle(10)
+        loop.update(lambda m: m.control.azimuth(5.0))  # camera: previews keep the full table
+        assert loop.wait_idle(10)
+        assert seen[1:] == [(False, False), (True, False)]
+        del seen[:]
+        loop.update(lambda m: m.editor.move_point(0, a=0.4), camera=False)  # opacity edit
+        loop.update(lambda m: m.control.azimuth(5.0))  # and a camera move before the full frame
+        assert loop.wait_idle(10)
+        assert seen[0] == (False, True) and seen[-1] == (True, False)
+    finally:
+        loop.close()
 
 
 def test_render_loop_reports_errors_and_recovers(tmp_path):

@@ -279,6 +279,8 @@ class Viewer:
             else:
                 self._camera(lambda c: c.drag(dx, dy))
         elif kind == "pointer_up":
+            if self._drag is not None:
+                self.loop.settle()  # the drag is over: no need to wait settle_s for more
             self._drag = None
         elif kind == "wheel":
             dy = float(event.get("dy", 0.0))
@@ -323,6 +325,8 @@ class Viewer:
         elif kind == "pointer_move" and self.picker.dragging:
             self._edit(lambda: self.picker.move(x, y))
         elif kind == "pointer_up":
+            if self.picker.dragging:
+                self.loop.settle()
             self.picker.release()
         elif kind == "double_click" and y < HIST_SIZE[1]:
             self._edit(lambda: self.picker.double_click(x, y))

@@ -144,10 +144,11 @@ class RenderLoop:
         self.on_busy = on_busy
         self.clock = clock
         self._cond = threading.Condition(threading.RLock())
-        self._revision = 0  # bumped by every change
-        self._drawn = -1  # revision of the last frame drawn (any kind)
-        self._final = -1  # revision of the last full frame drawn
+        self._revision = 0  # bumped by every change; 0: nothing wanted yet (update() asks for the first frame)
+        self._drawn = 0  # revision of the last frame drawn (any kind)
+        self._final = 0  # revision of the last full frame drawn
         self._camera_moved = True
+        self._tf_changed = False  # since the last full frame: previews use a small table
         self._last_change = -math.inf
         self._first_unanswered: float | None = None  # clock time of the oldest input not yet drawn
         self._closed = False
@@ -175,12 +176,20 @@ class RenderLoop:
             out = change(self.model) if change is not None else None
             self._revision += 1
             self._camera_moved = self._camera_moved or camera
+            self._tf_changed = self._tf_changed or not camera
             now = self.clock()
             self._last_change = -math.inf if final else now
             if self._first_unanswered is None:
                 self._first_unanswered = now
             self._cond.notify_all()
             return out
+
+    def settle(self) -> None:
+        """The input has ended (a mouse button came up): draw the full frame now rather
+        than ``settle_s`` later. Nothing is drawn if the full frame is already current."""
+        with self._cond:
+            self._last_change = -math.inf
+            self._cond.notify_all()
 
     def redraw(self) -> None:
         """Draw the full frame again (e.g. the front end reconnected)."""
@@ -255,11 +264,11 @@ class RenderLoop:
             size = full if final else self.sizer.size(full)  # type: ignore[arg-type]
             sort = self._camera_moved and final
             request = RenderRequest(size, sort=sort, final=final)  # type: ignore[arg-type]
-            state = (m.mesh, m.camera, m.editor.transfer_function())
+            state = (m.mesh, m.camera, m.editor.transfer_function(), self._tf_changed and not final)
             revision, wanted_at = self._revision, self._first_unanswered
             self._first_unanswered = None
             if final:
-                self._camera_moved = False
+                self._camera_moved = self._tf_changed = False
             if not self._busy:
                 self._busy = True
                 self._notify_busy(True)
@@ -277,10 +286,10 @@ class RenderLoop:
             job = self._next()
             if job is None:
                 return
-            request, (mesh, camera, tf), revision, wanted_at = job
+            request, (mesh, camera, tf, small_table), revision, wanted_at = job
             t0 = time.perf_counter()
             try:
-                image = self.model.draw(mesh, camera, tf, request)
+                image = self.model.draw(mesh, camera, tf, request, preview_table=small_table)
                 error = None
             except Exception as exc:  # noqa: BLE001 - shown in the viewer, not swallowed
                 image, error = None, f"{type(exc).__name__}: {exc}"

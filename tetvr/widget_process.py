@@ -64,6 +64,8 @@ def _serve(inbox: Connection, conn: Connection) -> None:  # pragma: no cover - r
             try:
                 if "mesh" in msg:
                     mesh = msg["mesh"]
+                if "settings" in msg and msg["settings"] != renderer.settings:
+                    renderer.settings = msg["settings"]  # a preview's small table, or back
                 if msg.get("op") == "gpu_bytes":
                     conn.send(("ok", renderer.gpu_bytes()))
                     continue
@@ -87,7 +89,8 @@ class ProcessRenderer:
 
     Parameters
     ----------
-    settings : the child's :class:`RenderSettings`.
+    settings : the child's :class:`RenderSettings`; replacing :attr:`settings` between
+        frames takes effect with the next frame (as for :class:`tetvr.gl.Renderer`).
     """
 
     def __init__(self, settings: RenderSettings | None = None) -> None:
@@ -138,7 +141,8 @@ class ProcessRenderer:
                order: NDArray[np.integer[Any]] | None = None) -> NDArray[np.float32]:
         """One frame: (height, width, 4) float32 premultiplied RGBA, row 0 at the top."""
         with self._lock:
-            msg: dict[str, Any] = {"camera": camera, "tf": tf, "size": tuple(size), "order": order}
+            msg: dict[str, Any] = {"camera": camera, "tf": tf, "size": tuple(size), "order": order,
+                                   "settings": self.settings}
             if mesh is not self._sent_mesh or not self.alive:
                 msg["mesh"] = mesh
             image = self._call(msg)
