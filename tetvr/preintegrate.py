@@ -66,8 +66,9 @@ _MAX_STORED_TAU = 1e30
 #: working arrays of the run recurrence and of the encoding. Measured with tracemalloc at
 #: 128-512 bins and 8-32 slices: 107-127 bytes.
 TABLE_BUILD_BYTES_PER_ENTRY = 128
-#: ... and of a warped table (``warp=True``), whose runs are composited all at once.
-TABLE_BUILD_BYTES_PER_ENTRY_WARPED = 256
+#: ... and of a warped table (``warp=True``): 113-121 bytes measured the same way at 128-192
+#: nodes and 8-22 slices (its per-front-node temporaries are O(N^2 K), below the table's own).
+TABLE_BUILD_BYTES_PER_ENTRY_WARPED = 128
 #: The largest table build allowed, whatever memory the machine has: 8 GiB, ~67M entries
 #: (1024 x 1024 x 64; the benchmark sweep's largest, 1024 x 1024 x 49, takes 6.1 GiB and
 #: ~5 s), whose float32 texture is 1 GiB. 2048 bins x 256 slices would need 138 GiB.
