@@ -281,6 +281,7 @@ def main() -> None:
         result = json.loads(path.read_text())
     result.update({"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                    "machine": common.machine()})
+    load = {"start": os.getloadavg()}  # other jobs on the machine: what the seconds shared it with
     only = args.only.split(",")
     if "series" in only:
         result["series"] = series(args)
@@ -290,6 +291,8 @@ def main() -> None:
         result["bricks"] = [bricks(args, float(x)) for x in args.tets.split(",")]
     if "accuracy" in only:
         result["accuracy"] = accuracy(args)
+    load["end"] = os.getloadavg()
+    result["load_average_1_5_15_min"] = load
     common.write_json(path, result)
     if all(k in result for k in ("series", "bricks")):
         chart(result, path.with_suffix(".png"))
