@@ -128,6 +128,27 @@ def test_a_unit_distance_in_other_units_is_warned_about():
         assert tetvr.render(mesh, size=(8, 8), method="reference")[..., 3].max() > 0.3
 
 
+def test_warnings_show_the_callers_line_not_tetvrs(tmp_path):
+    import meshio
+
+    mesh = scaled(synthetic.cube(2), 0.02 / np.sqrt(3))
+    # One zero-volume tet (its fourth point on the plane of three others): read() drops it and says so.
+    lo = mesh.points.min(axis=0)
+    pts = np.r_[mesh.points, [lo, lo + [0.01, 0, 0], lo + [0, 0.01, 0], lo + [0.01, 0.01, 0]]]
+    n = mesh.n_points
+    flat = np.r_[mesh.tets, [[n, n + 1, n + 2, n + 3]]]
+    values = np.r_[mesh.scalars, np.zeros(4)]
+    meshio.write(tmp_path / "m.vtu", meshio.Mesh(pts, [("tetra", flat)], point_data={"s": values}))
+    tf = TransferFunction.preset("viridis", mesh.scalar_range)  # unit_distance 1.0 on a 2 cm mesh: warned
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        read = tetvr.read(tmp_path / "m.vtu")
+        tetvr.render(read, tf=tf, size=(8, 8), method="reference")
+    said = {str(w.message).split(":")[0][:40]: w.filename for w in caught}
+    assert len(said) >= 2 and any("zero-volume" in k for k in said), said
+    assert set(said.values()) == {__file__}, said  # this test's lines, not tetvr's modules
+
+
 # ---- framing ----
 
 def _ndc(cam: Camera, mesh: tetvr.TetMesh, aspect: float = 1.0) -> np.ndarray:
@@ -156,7 +177,7 @@ def _sphere_camera(mesh: tetvr.TetMesh) -> Camera:
     centre, radius = bounding_sphere(mesh.bounds)
     d = np.array([-1.0, -0.6, -1.2]) / np.linalg.norm([-1.0, -0.6, -1.2])
     dist = radius / np.sin(np.radians(15.0))
-    return Camera(position=tuple(centre - d * dist), focal_point=tuple(centre),
+    return Camera(position=tuple(centre - d * dist), focal_point=tuple(centre), view_up=(0.0, 1.0, 0.0),
                   clipping_range=(dist - 1.05 * radius, dist + 1.05 * radius))
 
 
@@ -165,7 +186,7 @@ def test_fit_fills_more_of_the_picture_than_the_bounding_sphere(scale):
     mesh = pipe(scale)
     tf = default_transfer_function(mesh, opacity=1.0)
     covered = [float(np.mean(tetvr.render(mesh, camera=cam, tf=tf, size=(48, 48), method="reference")[..., 3] > 0.01))
-               for cam in (Camera.fit(mesh), _sphere_camera(mesh))]
+               for cam in (Camera.fit(mesh, view_up=(0, 1, 0)), _sphere_camera(mesh))]  # the pipe across the view
     assert covered[0] > 1.5 * covered[1]
 
 
@@ -173,6 +194,20 @@ def test_fit_for_a_wide_image_uses_its_width():
     mesh = pipe()
     ndc = _ndc(_fit(mesh, aspect=2.0), mesh, aspect=2.0)
     assert np.abs(ndc[:, :2]).max() <= 1.0 and np.abs(ndc[:, :2]).max() > 0.93
+
+
+@pytest.mark.parametrize("scale", SCALES)
+def test_fit_puts_z_up_unless_looking_along_z(scale):
+    mesh = pipe(scale)  # long along z: stands upright in the picture
+    cam = Camera.fit(mesh)
+    assert cam.view_up == (0.0, 0.0, 1.0)
+    ndc = _ndc(cam, mesh)
+    top, bottom = mesh.points[:, 2].argmax(), mesh.points[:, 2].argmin()
+    assert ndc[top, 1] > 0.5 > -0.5 > ndc[bottom, 1]  # +z points up on the screen
+    spread = ndc[:, :2].max(axis=0) - ndc[:, :2].min(axis=0)
+    assert spread[1] > 2 * spread[0]  # taller than wide
+    assert Camera.fit(mesh, direction=(0.1, 0, -1)).view_up == (0.0, 1.0, 0.0)  # z is (nearly) the view axis
+    assert Camera.fit(mesh, view_up=(1, 0, 0)).view_up == (1.0, 0.0, 0.0)  # an explicit one is kept
 
 
 def test_fit_keeps_its_keywords_and_checks_them():

@@ -5,8 +5,21 @@ from __future__ import annotations
 import errno
 import os
 import stat
+import sys
+import warnings
 
-__all__ = ["check_input_file", "check_instances", "short_path"]
+__all__ = ["check_input_file", "check_instances", "short_path", "warn"]
+
+_PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
+
+
+def warn(message: str, category: type[Warning] = UserWarning) -> None:
+    """``warnings.warn`` attributed to the first caller outside tetvr: the file and line a
+    warning shows are the user's (their script, their notebook cell), never tetvr's own."""
+    level, frame = 2, sys._getframe(1)
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level)
 
 
 def check_instances(**named: tuple[object, type]) -> None:

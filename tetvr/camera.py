@@ -130,12 +130,18 @@ class Camera:
         mesh: "TetMesh",
         *,
         direction: Any = (-1.0, -0.6, -1.2),
-        view_up: Any = (0.0, 1.0, 0.0),
+        view_up: Any = None,
         view_angle: float = 30.0,
         parallel: bool = False,
         zoom: float = 1.0,
     ) -> "Camera":
         """A camera looking along ``direction`` at the mesh, which fills the view.
+
+        ``view_up`` defaults to :data:`DEFAULT_VIEW_UP`, +z (the up axis of most FEM and
+        CFD models, and the superior direction of LPS/RAS patient coordinates), or +y
+        when ``direction`` runs (nearly) along z. The mesh formats tetvr reads carry no
+        up axis; a scene file (``"camera": {"fit": {"view_up": ...}}``) or a ParaView
+        state (its ``CameraViewUp``) says which way is up when it knows.
 
         The mesh's projected extent (its points as this camera sees them, perspective
         included) fills the view's height, or its width in a square view, whichever is
@@ -235,7 +241,23 @@ class Camera:
 _FIT_MARGIN = 0.04
 
 
-def _fit(mesh: Any, *, direction: Any = (-1.0, -0.6, -1.2), view_up: Any = (0.0, 1.0, 0.0),
+#: The up direction :meth:`Camera.fit` uses when none is given: +z.
+DEFAULT_VIEW_UP = (0.0, 0.0, 1.0)
+
+
+def default_view_up(direction: Any) -> tuple[float, float, float]:
+    """:data:`DEFAULT_VIEW_UP`, or +y when ``direction`` runs within ~25 degrees of the z axis
+    (z would be nearly parallel to the view direction there).
+
+    >>> default_view_up((-1, -0.6, -1.2)), default_view_up((0, 0, -1))
+    ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0))
+    """
+    d = np.asarray(_vec3(direction, "direction"))
+    n = float(np.linalg.norm(d))
+    return (0.0, 1.0, 0.0) if n > 0 and abs(d[2]) > 0.9 * n else DEFAULT_VIEW_UP
+
+
+def _fit(mesh: Any, *, direction: Any = (-1.0, -0.6, -1.2), view_up: Any = None,
          view_angle: float = 30.0, parallel: bool = False, zoom: float = 1.0, aspect: float = 1.0) -> Camera:
     """:meth:`Camera.fit` for an image of width/height ``aspect`` (``fit`` assumes a
     square one, which frames the mesh in any landscape image too)."""
@@ -244,7 +266,7 @@ def _fit(mesh: Any, *, direction: Any = (-1.0, -0.6, -1.2), view_up: Any = (0.0,
     if not np.linalg.norm(d) > 0:
         raise ValueError("direction must not be the zero vector")
     d = d / np.linalg.norm(d)
-    up = np.asarray(_vec3(view_up, "view_up"))
+    up = np.asarray(_vec3(default_view_up(d) if view_up is None else view_up, "view_up"))
     if not np.linalg.norm(up) > 0:
         raise ValueError("view_up must not be the zero vector")
     view_angle = _real(view_angle, "view_angle")
@@ -379,11 +401,11 @@ def check_clipping_range(camera: Camera, points: Any, *, stacklevel: int = 2) ->
     dmin, dmax = depth_extent(camera, points)
     if dmax >= near and dmin <= far:
         return False
-    import warnings
+    from ._checks import warn
 
     where = "in front of the near plane" if dmax < near else "beyond the far plane"
-    warnings.warn(f"the camera's clipping_range ({near:.6g}, {far:.6g}) clips all the data away: the data's depth "
-                  f"extent along the view is {dmin:.6g} .. {dmax:.6g}, all of it {where}, so the picture is blank; "
-                  "leave clipping_range out of a scene to compute it from the data, or use "
-                  "tetvr.camera.reset_clipping_range(camera, mesh.bounds)", UserWarning, stacklevel=stacklevel + 1)
+    warn(f"the camera's clipping_range ({near:.6g}, {far:.6g}) clips all the data away: the data's depth "
+         f"extent along the view is {dmin:.6g} .. {dmax:.6g}, all of it {where}, so the picture is blank; "
+         "leave clipping_range out of a scene to compute it from the data, or use "
+         "tetvr.camera.reset_clipping_range(camera, mesh.bounds)")
     return True

@@ -52,14 +52,13 @@ import functools
 import itertools
 import os
 import re
-import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._checks import check_input_file
+from ._checks import check_input_file, warn
 
 __all__ = [
     "VOLUME_CELLS",
@@ -583,8 +582,8 @@ def read_cells(path: str | os.PathLike[str], *, meshio_read: Callable[[str], Any
             flat = np.concatenate([np.asarray(b).reshape(len(b), -1) for b in per_block])
         except ValueError:  # blocks with different component counts: not one field
             shapes = sorted({np.asarray(b).shape[1:] for b in per_block})
-            warnings.warn(f"{os.path.basename(path)}: cell field {name!r} is left out: its blocks have different "
-                          f"component shapes {shapes}", stacklevel=3)
+            warn(f"{os.path.basename(path)}: cell field {name!r} is left out: its blocks have different "
+                 f"component shapes {shapes}")
             continue
         col = flat[split.parent]
         cdata[name] = col[:, 0] if col.shape[1] == 1 else col

@@ -35,7 +35,7 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from ._checks import check_input_file, short_path
+from ._checks import check_input_file, short_path, warn
 
 __all__ = ["COLLECTION_SUFFIXES", "Collection", "TimeStep", "is_collection", "leaf_files", "pieces", "read_pvd",
            "read_step", "merged_meshio"]
@@ -208,9 +208,9 @@ def merged_meshio(path: str, *, meshio_read: Callable[[str], Any]) -> Any:
         if index is None:
             index = 0
             if len(coll) > 1:
-                warnings.warn(f"{os.path.basename(path)} holds {len(coll)} time steps "
-                              f"(t = {_times_text(coll.times)}); read the first. tetvr.collections.read_step "
-                              "reads another; `tetvr render` renders them all", stacklevel=5)
+                warn(f"{os.path.basename(path)} holds {len(coll)} time steps "
+                     f"(t = {_times_text(coll.times)}); read the first. tetvr.collections.read_step "
+                     "reads another; `tetvr render` renders them all")
         files: list[str] = []
         for f in coll.steps[index].files:
             files += leaf_files(f) if is_collection(f) else [f]
@@ -279,8 +279,8 @@ def _common(path: str, kind: str, fields: list[tuple[str, dict[str, np.ndarray]]
     keep = [k for k in names if all(k in d and d[k].shape[1:] == fields[0][1][k].shape[1:] for _, d in fields)]
     dropped = sorted({k for _, d in fields for k in d} - set(keep))
     if dropped:
-        warnings.warn(f"{os.path.basename(path)}: {kind} field(s) {dropped} are left out: not in every piece "
-                      "with the same components", stacklevel=5)
+        warn(f"{os.path.basename(path)}: {kind} field(s) {dropped} are left out: not in every piece "
+             "with the same components")
     return keep
 
 

@@ -14,14 +14,13 @@ import dataclasses
 import io
 import math
 import os
-import warnings
 from functools import cached_property
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._checks import check_input_file
+from ._checks import check_input_file, warn
 
 __all__ = ["TetMesh", "read", "MeshReport"]
 
@@ -161,7 +160,7 @@ class TetMesh:
                 raise ValueError(f"{dropped} tetrahedra have zero volume (first: {int(np.argmax(flat))})")
             if dropped == t.shape[0]:
                 raise ValueError(f"all {dropped} tetrahedra have zero volume")
-            warnings.warn(f"dropped {dropped} zero-volume tetrahedra", stacklevel=2)
+            warn(f"dropped {dropped} zero-volume tetrahedra")
         keep = ~flat
         neg = vol6 < 0
         t[neg] = t[neg][:, [0, 1, 3, 2]]
@@ -468,7 +467,7 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
     m = read_cells(path, meshio_read=_read_any)
     tets = m.tets
     if m.split.split or m.split.ignored:
-        warnings.warn(f"{os.path.basename(path)}: {m.split.summary()}", stacklevel=2)
+        warn(f"{os.path.basename(path)}: {m.split.summary()}")
 
     point_names = list(m.point_data)
     cell_names = list(m.cell_data)
@@ -705,7 +704,7 @@ def _meshio_read(path: str) -> Any:
             continue
         said_ok = " ".join(chatter.getvalue().split())
         if said_ok:
-            warnings.warn(f"meshio reading {path!r}: {said_ok}", stacklevel=3)
+            warn(f"meshio reading {path!r}: {said_ok}")
         return m
     raise ValueError(f"cannot read mesh file {path!r}: " + " | ".join(failures))
 
@@ -746,7 +745,7 @@ def _from_blocks(points: ArrayLike, blocks: list[tuple[str, Any]], point_data: d
         found = ", ".join(f"{k}: {v}" for k, v in split.ignored) or "no cells"
         raise ValueError(f"{where} contains no tetrahedra or other volume cells ({found})")
     if split.split or split.ignored:
-        warnings.warn(f"{where}: {split.summary()}", stacklevel=3)
+        warn(f"{where}: {split.summary()}")
     names = list(point_data) + [n for n in cell_blocks if n not in point_data]
     if scalars is None:
         if not names:

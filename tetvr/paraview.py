@@ -54,13 +54,13 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ._checks import warn
 from .camera import Camera, reset_clipping_range
 
 if TYPE_CHECKING:
@@ -488,13 +488,13 @@ def load_state(
 
     state = read_state(path)
     if state.representation and state.representation != "Volume":
-        warnings.warn(f"{state.path}: the dataset is shown as {state.representation!r} in ParaView; tetvr renders "
-                      "it as a volume with the state's colour and opacity maps", UserWarning, stacklevel=2)
+        warn(f"{state.path}: the dataset is shown as {state.representation!r} in ParaView; tetvr renders "
+             "it as a volume with the state's colour and opacity maps", UserWarning)
     mesh_path = _find_data(state.data_file, state.path, data_directory)
     mesh = _read_mesh(mesh_path, state, read)
     if state.association == "CELLS" and mesh.report.scalar_source != "cell":
-        warnings.warn(f"{state.path}: ParaView colours by the cell array {state.array!r}, tetvr found a point array "
-                      "of that name and renders it", UserWarning, stacklevel=2)
+        warn(f"{state.path}: ParaView colours by the cell array {state.array!r}, tetvr found a point array "
+             "of that name and renders it", UserWarning)
     tf = state_transfer_function(state)
     if state.unit_distance is None:
         tf = dataclasses.replace(tf, unit_distance=paraview_unit_distance(mesh.bounds, mesh.n_tets))

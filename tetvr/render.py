@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import warnings
 from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ._checks import warn
 from .camera import Camera, check_clipping_range
 from .mesh import TetMesh
 from .settings import RenderSettings
@@ -96,11 +96,10 @@ def _warn_if_invisible(mesh: TetMesh, tf: TransferFunction) -> None:
     diag = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
     alpha = -np.expm1(diag / tf.unit_distance * np.log1p(-a_max))
     if alpha < 0.05:
-        warnings.warn(
+        warn(
             f"the picture will be nearly blank: at most {alpha:.2g} opacity across the whole mesh (its diagonal is "
             f"{diag:.3g}, the transfer function's unit_distance {tf.unit_distance:.3g}); give a unit_distance in the "
-            f"mesh's units, e.g. TransferFunction.preset(..., mesh=mesh) or unit_distance={diag / 20:.3g}",
-            stacklevel=3)
+            f"mesh's units, e.g. TransferFunction.preset(..., mesh=mesh) or unit_distance={diag / 20:.3g}")
 
 
 def render(

@@ -30,12 +30,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import warnings
 from functools import cached_property
 from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from ._checks import warn
 
 __all__ = [
     "Volume",
@@ -298,11 +299,9 @@ class Volume:
         if max(self.dims) <= max_size:
             return self
         new = tuple(min(n, max_size) for n in self.dims)
-        warnings.warn(
+        warn(
             f"volume of {self.dims} voxels exceeds the GPU's largest 3D texture ({max_size} per side); "
-            f"it is downsampled to {new} (box-filtered, same world box)",
-            stacklevel=2,
-        )
+            f"it is downsampled to {new} (box-filtered, same world box)")
         return self.downsampled(new)
 
     def in_space(self, space: str) -> "Volume":

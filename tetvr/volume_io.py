@@ -36,7 +36,7 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._checks import check_input_file
+from ._checks import check_input_file, warn
 from ._voxels import (
     _DEFLATE_MAX_RATIO,
     _check_declared,
@@ -750,8 +750,8 @@ def read_dicom(path: str | os.PathLike[str], *, space: str = "LPS") -> Volume:
         uid = max(series, key=lambda k: len(series[k]))
         if len(series) > 1:
             others = {k: len(v) for k, v in series.items() if k != uid}
-            warnings.warn(f"{where!r} holds {len(series)} DICOM series; reading {uid!r} ({len(series[uid])} slices), "
-                          f"ignoring {others}", stacklevel=2)
+            warn(f"{where!r} holds {len(series)} DICOM series; reading {uid!r} ({len(series[uid])} slices), "
+                 f"ignoring {others}")
         names = series[uid]
     else:
         names = [where]
@@ -827,5 +827,5 @@ def _dicom_check_positions(headers: list[Any], where: str) -> None:
         raise ValueError(f"DICOM series in {where!r} has {same} slice(s) at the position of another "
                          "(duplicates or several acquisitions)")
     if np.max(np.abs(gaps - dz)) > 1e-3 * max(dz, 1.0) + 1e-4:
-        warnings.warn(f"the slices of the DICOM series in {where!r} are not evenly spaced "
-                      f"({gaps.min():.4g} to {gaps.max():.4g} apart); they are placed {gaps[0]:.4g} apart", stacklevel=3)
+        warn(f"the slices of the DICOM series in {where!r} are not evenly spaced "
+             f"({gaps.min():.4g} to {gaps.max():.4g} apart); they are placed {gaps[0]:.4g} apart")

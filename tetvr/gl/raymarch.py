@@ -121,11 +121,11 @@ class Marcher:
         rec = march_records(mesh)
         folds = folded_faces(mesh)
         if folds:
-            import warnings
+            from .._checks import warn
 
-            warnings.warn(f"the mesh is tangled: {folds} interior faces have both their cells on one side (cells "
-                          f"overlap in space); tet marching follows faces and renders it wrong: use "
-                          f"method=\"projected\" (\"auto\" does)", RuntimeWarning, stacklevel=4)
+            warn(f"the mesh is tangled: {folds} interior faces have both their cells on one side (cells "
+                 f"overlap in space); tet marching follows faces and renders it wrong: use "
+                 f"method=\"projected\" (\"auto\" does)", RuntimeWarning)
         max_tex = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
         if mesh.n_tets > raymarch_capacity(max_tex):
             raise MemoryError(f"the ray caster holds at most {raymarch_capacity(max_tex)} tets in one texture on this "
