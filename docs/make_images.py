@@ -2,7 +2,7 @@
 
     pip install -e ".[bench]"             # matplotlib, for the labelled panels
     python docs/make_images.py            # everything, ~1 minute on llvmpipe
-    python docs/make_images.py methods    # one group: quickstart, methods, fusion, limits, interactive
+    python docs/make_images.py methods    # one group: quickstart, defaults, methods, fusion, limits, interactive
     python docs/make_images.py tables     # print docs/limits.md's table from bench/results/
 
 Every picture under docs/images/guide/ comes from this script; docs/images/demo.png from
@@ -25,7 +25,8 @@ import numpy as np
 
 import tetvr
 from tetvr import Camera, RenderSettings, TransferFunction, synthetic
-from tetvr.image import composite_over, psnr
+from tetvr.annotate import panels as labelled
+from tetvr.image import DEFAULT_BACKGROUND, psnr
 from tetvr.reference import render_reference
 from tetvr.stability import CASES, case
 
@@ -34,30 +35,11 @@ OUT = HERE / "images" / "guide"
 ROOT = HERE.parent
 
 
-def panels(images, titles, path, *, background=(0, 0, 0), suptitle=None, cols=None, size_in=2.2):
-    """Images side by side (or in rows of ``cols``) with titles, as one PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    n = len(images)
-    cols = cols or n
-    rows = (n + cols - 1) // cols
-    h, w = images[0].shape[:2]
-    fig, axes = plt.subplots(rows, cols, figsize=(size_in * cols, size_in * h / w * rows + 0.45 * rows + 0.3),
-                             squeeze=False)
-    for ax in axes.ravel():
-        ax.set_axis_off()
-    for ax, img, title in zip(axes.ravel(), images, titles):
-        ax.imshow(np.clip(composite_over(img, background)[..., :3], 0, 1), interpolation="nearest")
-        ax.set_title(title, fontsize=8)
-    if suptitle:
-        fig.suptitle(suptitle, fontsize=10)
-    fig.tight_layout()
+def panels(images, titles, path, *, background=DEFAULT_BACKGROUND, suptitle=None, cols=None, size_in=2.2):
+    """Images side by side (or in rows of ``cols``), each under its title, as one PNG
+    (tetvr.annotate.panels: the same labelled grid tetvr compare and fusion-demo write)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight", pad_inches=0.05)
-    plt.close(fig)
+    path.write_bytes(labelled(images, titles, background=background, suptitle=suptitle, cols=cols, width_in=size_in))
     print("wrote", path.relative_to(ROOT))
 
 
@@ -114,13 +96,46 @@ def quickstart():
     with tetvr.Renderer() as r:
         imgs = [r.render(mesh, cam, colormap(n, (0.45, 1.4), opacity=ramp, unit_distance=0.25), size=(240, 180))
                 for n in names]
-        panels(imgs, names, OUT / "colormaps.png", background=(0.08, 0.08, 0.1),
+        panels(imgs, names, OUT / "colormaps.png",
                suptitle="post.vtk, Pressure, one opacity ramp, five colour maps")
         units = [0.08, 0.25, 1.0]
         imgs = [r.render(mesh, cam, TransferFunction.preset("viridis", (0.45, 1.4), opacity=ramp, unit_distance=u),
                          size=(240, 180)) for u in units]
-        panels(imgs, [f"unit_distance = {u}" for u in units], OUT / "unit_distance.png", background=(0.08, 0.08, 0.1),
+        panels(imgs, [f"unit_distance = {u}" for u in units], OUT / "unit_distance.png",
                suptitle="the same opacity points, three unit distances")
+
+
+SHARED = Path(__import__("os").environ.get("TETVR_SHARED_DATA", ROOT.parent / "shared" / "data"))
+#: Real results for the defaults pictures: (file in ../shared/data/tets, field).
+DEFAULT_MESHES = [("bluntfin_tets.vtu", "Density"), ("pipe_flow_init_flow.vtu", "Velocity"),
+                  ("beam_tet4_result_100.vtu", "VonMises_stress"), ("post.vtk", "Pressure")]
+
+
+def defaults():
+    """Real FEM/CFD results with tetvr's defaults, beside a constant opacity over the full range."""
+    from tetvr.camera import _fit
+    from tetvr.render import default_transfer_function
+    from tetvr.transfer import default_unit_distance
+
+    imgs, titles = [], []
+    size = (320, 240)
+    for name, field in DEFAULT_MESHES:
+        path = SHARED / "tets" / name
+        if not path.is_file():
+            print(f"skipped {name}: {path} is absent (the shared data)")
+            continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # zero-volume tets dropped, cell data averaged
+            mesh = tetvr.read(path, field)
+        cam = _fit(mesh, aspect=size[0] / size[1])
+        flat = TransferFunction.preset("viridis", mesh.scalar_range, opacity=0.5,
+                                       unit_distance=default_unit_distance(mesh.bounds))
+        for tf, what in ((flat, "full range, opacity 0.5"), (default_transfer_function(mesh), "tetvr's default")):
+            imgs.append(tetvr.render(mesh, camera=cam, tf=tf, size=size))
+            titles.append(f"{name.split('_')[0].split('.')[0]} ({field}): {what}")
+    if imgs:
+        panels(imgs, titles, OUT / "defaults.png", cols=2, size_in=3.2,
+               suptitle="constant opacity over the field's full range (left) and the data-driven default (right)")
 
 
 #: setting name -> (scene, variant settings, what it shows)
@@ -194,7 +209,7 @@ def fusion(size=(320, 240)):
                              raycaster=c, ray_textures=textures if mode == "ray_textures" else None))
     titles = ["volume alone", "mesh alone", *(f"mode='{m}'" for m in FUSION_MODES)]
     titles[-1] += "\n(right half: first 55 % of each ray)"
-    panels(imgs, titles, OUT / "fusion_modes.png", cols=3, size_in=3.0,
+    panels(imgs, titles, OUT / "fusion_modes.png", cols=3, size_in=3.0, background=s.background,
            suptitle="carotid flow: speed as a volume (grey) and the fast lumen as a tet mesh (hot)")
 
 
@@ -212,7 +227,7 @@ def limits(size=(96, 96)):
             diffs.append(_diff(img, ref, k))
             titles.append(f"{name}\n{'exact (empty image)' if p > 150 else f'{p:.1f} dB'}")
             dtitles.append(f"{name}\n|GPU - ref| x {k}")
-    panels(gpu, titles, OUT / "stability_cases.png", cols=6, size_in=1.7, background=(1, 1, 1),
+    panels(gpu, titles, OUT / "stability_cases.png", cols=6, size_in=1.7,
            suptitle="the stability cases, default settings, 96x96 (PSNR against the reference)")
     panels(diffs, dtitles, OUT / "stability_errors.png", cols=6, size_in=1.7,
            suptitle="where the error is (each magnified to show its shape)")
@@ -230,7 +245,7 @@ def interactive():
     with tetvr.Renderer() as r:
         frames = [r.render(mesh, c, tf, size=(160, 120)) for c in orbit(cam, 6)]
     panels(frames, [f"{60 * k} deg" for k in range(6)], OUT / "orbit.png", cols=6, size_in=1.8,
-           background=(0.08, 0.08, 0.1), suptitle="tetvr animate demo.json --orbit 6 (frames 0..5)")
+           suptitle="tetvr animate demo.json --orbit 6 (frames 0..5)")
 
 
 def tables():
@@ -258,7 +273,7 @@ def tables():
             print(f"| `{name}` | {what} | " + " | ".join(cells) + " |")
 
 
-GROUPS = {"quickstart": quickstart, "methods": methods, "fusion": fusion, "limits": limits, "interactive": interactive,
+GROUPS = {"quickstart": quickstart, "defaults": defaults, "methods": methods, "fusion": fusion, "limits": limits, "interactive": interactive,
           "tables": tables}
 
 

@@ -349,8 +349,8 @@ def panels(
     title_in = 0.3 if any(names) else 0.05
     face = "none" if background is None else tuple(float(v) for v in background)
     ink = _text_colour(background)
-    fig = Figure(figsize=(width_in * cols, rows * (width_in * aspect + title_in) + (0.35 if suptitle else 0.0)),
-                 dpi=dpi, facecolor=face)
+    height_in = rows * (width_in * aspect + title_in) + (0.35 if suptitle else 0.0)
+    fig = Figure(figsize=(width_in * cols, height_in), dpi=dpi, facecolor=face)
     FigureCanvasAgg(fig)
     axes = fig.subplots(rows, cols, squeeze=False)
     for ax in axes.ravel():
@@ -359,8 +359,8 @@ def panels(
         ax.imshow(to_rgba8(composite_over(im, background)), interpolation="nearest")
         ax.set_title(name, fontsize=8, color=ink)
     if suptitle:
-        fig.suptitle(suptitle, fontsize=10, color=ink)
-    fig.tight_layout(pad=0.3)
+        fig.suptitle(suptitle, fontsize=10, color=ink, y=1.0 - 0.05 / height_in, va="top")
+    fig.tight_layout(pad=0.3, rect=(0.0, 0.0, 1.0, 1.0 - (0.35 / height_in if suptitle else 0.0)))
     out = io.BytesIO()
     fig.savefig(out, format="png", dpi=dpi, facecolor=face, transparent=background is None)
     return out.getvalue()
