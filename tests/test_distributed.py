@@ -412,3 +412,27 @@ def test_cli_animate_on_the_cluster_writes_the_serial_frames(client, tmp_path, k
     for p in serial:
         assert p.read_bytes() == (tmp_path / "dask" / p.name).read_bytes(), p.name
     assert serial[0].read_bytes() != serial[-1].read_bytes()
+
+
+def test_bricks_survive_a_killed_worker(client, local):
+    """The workers hold the bricks between views; one killed loses none: the scheduler
+    remakes its bricks from their tasks and the next view is the same image."""
+    import signal
+
+    from tetvr.distributed import distribute_mesh
+
+    client.wait_for_workers(2, timeout=60)
+    mesh = synthetic.cube(6, rotate=False)
+    camera, tf = _scene(mesh, "perspective")
+    bricks = distribute_mesh(mesh, 4, client)
+    try:
+        before = bricks.render(camera, tf, size=SIZE)
+        held = client.who_has(list(bricks.futures.values()))
+        victim_addr = next(iter(next(iter(held.values()))))
+        victim = client.run(os.getpid, workers=[victim_addr])[victim_addr]
+        os.kill(victim, signal.SIGKILL)
+        after = bricks.render(camera, tf, size=SIZE)
+        assert np.array_equal(before, after)
+        assert np.abs(after - local["auto"].render(mesh, camera, tf, size=SIZE)).max() < 1e-5
+    finally:
+        bricks.release()
