@@ -392,8 +392,11 @@ def distribute_mesh(mesh: TetMesh, n_bricks: int, client: Any, *, tree: BrickTre
         warnings.warn("some k-d split planes run through cells (kd_bricks(cut=False)): the composite is "
                       "approximate within a cell's width of those planes", stacklevel=3)
     # Each brick travels inside its task (not scattered): a worker that dies loses no
-    # data, the scheduler reruns the task elsewhere.
-    futures = {b.index: client.submit(_hold, tree.brick_mesh(b), pure=False) for b in tree.bricks()}
+    # data, the scheduler reruns the task elsewhere. Dask warns of such large tasks; here
+    # they are the point (a mesh too large for that is one for distribute_pieces).
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Sending large graph")
+        futures = {b.index: client.submit(_hold, tree.brick_mesh(b), pure=False) for b in tree.bricks()}
     return ClusterBricks(client, futures, tree.root, tree.whole, {i: f"{len(tree.bricks())} k-d bricks of the mesh"
                                                                   for i in futures}, chooser=mesh)
 
