@@ -288,7 +288,9 @@ def main() -> None:
     if "composite" in only:
         result["composite"] = composite()
     if "bricks" in only:
-        result["bricks"] = [bricks(args, float(x)) for x in args.tets.split(",")]
+        new = [bricks(args, float(x)) for x in args.tets.split(",")]
+        kept = [b for b in result.get("bricks", []) if all(abs(b["n_tets"] - x["n_tets"]) > 1 for x in new)]
+        result["bricks"] = sorted(kept + new, key=lambda b: b["n_tets"])  # other sizes keep their last run
     if "accuracy" in only:
         result["accuracy"] = accuracy(args)
     load["end"] = os.getloadavg()
