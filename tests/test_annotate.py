@@ -237,6 +237,13 @@ def test_cli_version_and_info(capsys):
     assert "'Pressure' (point)" in out and "median" in out and "99%" in out and "tetrahedra" in out
 
 
+def test_info_percentiles_of_a_field_that_is_mostly_one_value():
+    from tetvr.cli import _stats_line
+
+    line = _stats_line(np.r_[np.zeros(90), np.arange(1.0, 11.0)])  # a CT that is mostly air
+    assert "1% 0, median 0, 99% 9.5" in line, line  # the median is not widened to the maximum
+
+
 def test_cli_info_on_a_volume(capsys):
     from tetvr.examples import bundled
 

@@ -426,7 +426,7 @@ def _expand_series(series: Sequence[str] | None) -> Any:
 
 def _stats_line(values: Any, weights: Any = None) -> str:
     """min, percentiles (weighted by volume where given) and max of a field, as text."""
-    from .transfer import robust_range
+    from .transfer import weighted_percentiles
 
     v = np.asarray(values, dtype=np.float64)
     if v.ndim == 2:
@@ -435,8 +435,7 @@ def _stats_line(values: Any, weights: Any = None) -> str:
     if not finite.any():
         return "no finite values"
     w = None if weights is None else np.asarray(weights)[finite]
-    p1, p99 = robust_range(v[finite], w, (1.0, 99.0))
-    _, median = robust_range(v[finite], w, (0.0, 50.0))
+    p1, median, p99 = weighted_percentiles(v[finite], w, (1.0, 50.0, 99.0))
     bad = f", {int((~finite).sum())} NaN/Inf" if not finite.all() else ""
     return (f"range {v[finite].min():.4g} .. {v[finite].max():.4g}; 1% {p1:.4g}, median {median:.4g}, "
             f"99% {p99:.4g}{bad}")

@@ -64,6 +64,24 @@ def field_range(mesh: Any) -> tuple[float, float]:
     return robust_range(cells, vol)
 
 
+def weighted_percentiles(values: ArrayLike, weights: ArrayLike | None, percentiles: Sequence[float]) -> list[float]:
+    """The ``percentiles`` (0..100) of ``values``, each weighted by ``weights`` (``None``:
+    equally): the value at which the cumulative weight, taken at each value's midpoint,
+    passes ``q``.
+
+    >>> weighted_percentiles([0.0, 1.0, 2.0, 3.0], [1, 1, 1, 5], [50])
+    [2.5]
+    """
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    w = np.ones_like(v) if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
+    if not w.sum() > 0:
+        w = np.ones_like(v)
+    order = np.argsort(v, kind="stable")
+    v, w = v[order], w[order]
+    cum = (np.cumsum(w) - 0.5 * w) / w.sum()
+    return [float(np.interp(q / 100.0, cum, v)) for q in percentiles]
+
+
 def robust_range(values: ArrayLike, weights: ArrayLike | None = None,
                  percentiles: tuple[float, float] = DEFAULT_PERCENTILES) -> tuple[float, float]:
     """The ``percentiles`` of ``values`` (weighted by ``weights``), widened to the full
@@ -81,15 +99,9 @@ def robust_range(values: ArrayLike, weights: ArrayLike | None = None,
     w = np.ones_like(v) if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
     if w.shape != v.shape or np.any(w < 0) or not np.all(np.isfinite(w)):
         raise ValueError(f"weights must be finite, non-negative and one per value, got shape {w.shape}")
-    if not w.sum() > 0:
-        w = np.ones_like(v)
-    order = np.argsort(v, kind="stable")
-    v, w = v[order], w[order]
-    # The weighted percentile: the value at which the cumulative weight (midpoints) passes q.
-    cum = (np.cumsum(w) - 0.5 * w) / w.sum()
-    lo, hi = (float(np.interp(q / 100.0, cum, v)) for q in percentiles)
+    lo, hi = weighted_percentiles(v, w, percentiles)
     if not hi > lo:
-        lo, hi = float(v[0]), float(v[-1])
+        lo, hi = float(v.min()), float(v.max())
     # As render's _tf_range: a range the GPU's float32 scalars can resolve.
     if hi - lo <= 1e-5 * max(abs(lo), abs(hi)):
         hi = lo + max(abs(lo), 1.0) * 1e-3
