@@ -20,7 +20,7 @@ from typing import Any, Callable
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results"
 #: Files whose table blocks this script owns.
-DOCS = (ROOT / "README.md", ROOT / "bench" / "README.md", ROOT / "docs" / "methods.md", ROOT / "docs" / "limits.md")
+DOCS = (ROOT / "docs" / "interactive.md", ROOT / "README.md", ROOT / "bench" / "README.md", ROOT / "docs" / "methods.md", ROOT / "docs" / "limits.md")
 
 
 def _load(name: str) -> dict[str, Any]:
@@ -100,7 +100,38 @@ def spiky_tf() -> str:
             "median of 3).\n\n" + "\n".join(rows))
 
 
-TABLES: dict[str, Callable[[], str]] = {"vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages,
+def viewer_latency() -> str:
+    """The Jupyter viewer's latency in Chromium, from the input event to pixels on the page
+    (bench/viewer.py)."""
+    r = _load("viewer.json")
+    labels = {"after": "`tetvr.widget.Viewer` (jupyter_rfb, render loop, render process)",
+              "before": "ipywidgets.Image + ipyevents, rendering in the event handler"}
+    rows = ["| mesh | tets | viewer | input → first pixels ms | mouse-up → full frame ms | frames shown in the 1 s drag |",
+            "|---|---:|---|---:|---:|---:|"]
+
+    def ms(x: float | None) -> str:
+        return "never" if x is None else f"{x:.0f}"
+
+    for name, m in r["meshes"].items():
+        for variant in ("after", "before"):
+            v = m.get(variant)
+            if v is None:
+                continue
+            if "skipped" in v:
+                rows.append(f"| {name} | {m['n_tets']:,} | {labels[variant]} | not measured: {v['skipped']} | | |")
+                continue
+            md, n = v["median"], len(v["runs"])
+            frames = "–" if md["frames_in_drag"] is None else f"{md['frames_in_drag']:.0f}"
+            rows.append(f"| {name} | {m['n_tets']:,} | {labels[variant]} ({n} drags) | {ms(md['first_pixels_ms'])} "
+                        f"| {ms(md['full_frame_ms'])} | {frames} |")
+    size = "x".join(str(x) for x in r["size"])
+    la = r.get("loadavg_start")
+    load = f"1-minute load average {la[0]:.1f} on {r['machine'].get('cpu_count', '?')} cores" if la else "load unknown"
+    return (f"{size} picture; {r['gesture']}; medians; headless Chromium and JupyterLab on the same machine, "
+            f"Mesa llvmpipe, {load} ({r['date']}, `bench/results/viewer.json`).\n\n" + "\n".join(rows))
+
+
+TABLES: dict[str, Callable[[], str]] = {"viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages,
                                         "spiky_tf": spiky_tf}
 _BLOCK = re.compile(r"(<!-- table:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /table:(?P=name) -->)", re.S)
 

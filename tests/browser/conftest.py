@@ -15,7 +15,7 @@ SIZE = (480, 360)
 @pytest.fixture(scope="session")
 def lab(tmp_path_factory):
     """A JupyterLab server on 127.0.0.1 serving a notebook with the viewer on post.vtk:
-    yields the notebook's URL (with the token)."""
+    yields the notebook's URL (with the token) and its path."""
     why = missing()
     if why:
         pytest.skip(why)
@@ -28,7 +28,7 @@ def lab(tmp_path_factory):
     except RuntimeError as exc:
         pytest.fail(str(exc))
     try:
-        yield f"{url}/lab/tree/viewer.ipynb?token={token}"
+        yield f"{url}/lab/tree/viewer.ipynb?token={token}", root / "viewer.ipynb"
     finally:
         stop()
 

@@ -9,6 +9,7 @@ One notebook shows ``Viewer(post.vtk, size=(480, 360))``; the tests run in order
 * a 1 s drag of 30 moves is followed by the full frame within 2 s of mouse-up;
 * in an 800 px wide window the picture keeps its aspect, is drawn at the size shown, and
   the viewer fits the window;
+* the saved notebook holds a PNG of the first full frame beside the widget;
 * no severe console errors.
 
 A frame is "full" when the <img>'s natural size equals its size on the page (previews are
@@ -86,7 +87,7 @@ def page(lab, browser):
     """The notebook open, its cell run, the viewer's full frame shown."""
     from tests.browser.lab import open_and_run
 
-    open_and_run(browser, lab, ".tetvr-image img")
+    open_and_run(browser, lab[0], ".tetvr-image img")
     assert browser.execute_script(_WATCH_JS)
     first = _wait(browser, "the first full frame", _is_full, timeout=90)
     return browser, first
@@ -176,6 +177,25 @@ def test_the_layout_keeps_the_aspect_in_an_800px_window(page):
             assert r["x"] + r["width"] <= inner, f"button {button.text!r} is off-screen"
     finally:
         driver.set_window_size(size["width"], size["height"])
+
+
+def test_the_saved_notebook_keeps_a_picture(page, lab):
+    import base64
+    import json
+
+    driver, first = page
+    path = lab[1]
+    before = path.stat().st_mtime_ns
+    driver.execute_script("window.jupyterapp.commands.execute('docmanager:save')")
+    end = time.monotonic() + 20
+    while path.stat().st_mtime_ns == before and time.monotonic() < end:
+        time.sleep(0.1)
+    outputs = json.loads(path.read_text())["cells"][0]["outputs"]
+    pngs = [o["data"]["image/png"] for o in outputs if "image/png" in o.get("data", {})]
+    assert pngs, f"no image/png in the saved output: {[sorted(o.get('data', {})) for o in outputs]}"
+    png = base64.b64decode(pngs[-1])
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and int.from_bytes(png[16:20], "big") == SIZE[0]
+    assert any("application/vnd.jupyter.widget-view+json" in o.get("data", {}) for o in outputs)
 
 
 def test_no_severe_console_errors(page):
