@@ -92,6 +92,7 @@ vec4 integrate_part(vec4 v0, vec4 v1, float len) {
 
 // A cut on which colour and opacity are linear: in parts (see SUB_THETA), composited.
 vec4 integrate_cut(vec4 v0, vec4 v1, float len) {
+    if (v0.a == 0.0 && v1.a == 0.0) return vec4(0.0);  // transparent: most of a sparse transfer function
     float x0 = 1.0 - min(v0.a, MAX_OPACITY), x1 = 1.0 - min(v1.a, MAX_OPACITY);
     float theta = len * u_inv_unit_distance * mean_neg_log(x0, x1);
     float parts = max(ceil(theta / SUB_THETA), ceil(abs(log2(x1 / x0))));
@@ -110,7 +111,7 @@ vec4 integrate_cut(vec4 v0, vec4 v1, float len) {
 // The piece from scalar s0 (transfer function v0, interval i0; tf_point_at) to s1 (v1, i1)
 // over world length len, cut at the control points it crosses, in ray order.
 vec4 integrate_piece(float s0, vec4 v0, int i0, float s1, vec4 v1, int i1, float len) {
-    if (i0 == i1) return v0.a == 0.0 && v1.a == 0.0 ? vec4(0.0) : integrate_cut(v0, v1, len);
+    if (i0 == i1) return integrate_cut(v0, v1, len);
     vec4 acc = vec4(0.0);
     float s_a = s0;
     vec4 v_a = v0;

@@ -208,7 +208,9 @@ class RaycastSettings:
 
     def step_for(self, volume: Volume, tf: TransferFunction) -> float:
         """The world step used for ``volume`` and ``tf`` (``tf`` sizes an "auto" step)."""
-        return float(self.step) if self.step != "auto" else auto_step(volume, tf, self.mode)
+        if self.step is None or self.step == "auto":  # __post_init__ made None "auto"
+            return auto_step(volume, tf, self.mode)
+        return float(self.step)
 
     def bins_for(self, volume: Volume, tf: TransferFunction) -> int:
         """The table's scalar bins for ``volume`` and ``tf``."""
