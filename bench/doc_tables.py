@@ -20,7 +20,8 @@ from typing import Any, Callable
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results"
 #: Files whose table blocks this script owns.
-DOCS = (ROOT / "docs" / "interactive.md", ROOT / "README.md", ROOT / "bench" / "README.md", ROOT / "docs" / "methods.md", ROOT / "docs" / "limits.md")
+DOCS = (ROOT / "docs" / "interactive.md", ROOT / "README.md", ROOT / "bench" / "README.md", ROOT / "docs" / "methods.md", ROOT / "docs" / "limits.md",
+        ROOT / "docs" / "distributed.md")
 
 
 def _load(name: str) -> dict[str, Any]:
@@ -100,6 +101,141 @@ def spiky_tf() -> str:
             "median of 3).\n\n" + "\n".join(rows))
 
 
+def _dist() -> dict[str, Any]:
+    return _load("distributed.json")
+
+
+def _when(r: dict[str, Any]) -> str:
+    m = r.get("machine", {})
+    return f"{m.get('cpu_count', '?')} cores, {r['date'][:10]}, `bench/results/distributed.json`"
+
+
+def distributed_series() -> str:
+    """Time series on Dask against a serial loop (bench/distributed.py)."""
+    r = _dist()
+    s = r["series"]
+    rows = ["| workers | serial frames/s | Dask frames/s | Dask / serial | Dask's own cost per frame | frames identical |",
+            "|---:|---:|---:|---:|---:|---|"]
+    for k, v in sorted(s["workers"].items(), key=lambda kv: int(kv[0])):
+        rows.append(f"| {k} | {v['serial_frames_per_s']:.2f} | {v['dask_frames_per_s']:.2f} | {v['speedup']:.2f}x "
+                    f"| {v['dask_overhead_s_per_frame'] * 1e3:.0f} ms | {'yes' if v['identical'] else 'NO'} |")
+    size = "x".join(str(x) for x in s["size"])
+    n_rounds = len(next(iter(s["workers"].values()))["rounds"])
+    return (f"{s['steps']} steps of {s['mesh_tets']:,} tets, each read from its `.vtu` and rendered at {size}; "
+            f"best of {n_rounds} alternated rounds ({_when(r)}).\n\n" + "\n".join(rows))
+
+
+def distributed_bricks() -> str:
+    """Sort-last bricks on 2 workers: split, first frame, view change, memory (bench/distributed.py)."""
+    r = _dist()
+    rows = ["| tets | P | method | cells cut | split (client) s | first frame s | per view change s "
+            "| peak memory per worker MiB |",
+            "|---:|---:|---|---:|---:|---:|---:|---:|"]
+    for res in r["bricks"]:
+        for p, v in sorted(res["P"].items(), key=lambda kv: int(kv[0])):
+            rows.append(f"| {res['n_tets']:,} | {p} | {v['method']} | {v['cells_cut']:,} | {v['split_s']:.2f} "
+                        f"| {v['first_frame_s']:.2f} | {v['view_change_median_s']:.2f} "
+                        f"| {max(v['worker_peak_rss_mib']):.0f} |")
+    size = "x".join(str(x) for x in r["bricks"][0]["size"])
+    comp = r["composite"]
+    c = ", ".join(f"{comp[p]['ns_per_pixel_per_brick']:.1f}" for p in sorted(comp, key=int))
+    return (f"{size}, a rotated synthetic cube (planes cut cells), 2 worker processes on a fresh LocalCluster "
+            f"per P, median of the views of an orbit after the first ({_when(r)}). Compositing alone on the "
+            f"client: {c} ns per pixel per brick (P = {', '.join(sorted(comp, key=int))}).\n\n" + "\n".join(rows))
+
+
+def distributed_accuracy() -> str:
+    """The acceptance matrix: composite vs single-process image and vs the reference."""
+    r = _dist()["accuracy"]
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for c in r["cases"]:
+        groups.setdefault((c["mesh"], c["method"]), []).append(c)
+    rows = ["| mesh | tets | method | cells cut (P = 2 / 4 / 8) | max abs difference vs one process "
+            "| one process's max error vs the reference | PSNR bricks - one process (dB) |",
+            "|---|---:|---|---|---:|---:|---|"]
+    for (mesh, method), cs in groups.items():
+        cut = " / ".join(str(next(c["cells_cut"] for c in cs if c["P"] == p)) for p in (2, 4, 8))
+        d = [c["psnr_bricks"] - c["psnr_whole"] for c in cs]
+        resolved = "/".join(sorted({c["resolved"] for c in cs}))
+        name = f"default ({resolved})" if method == "auto" else method
+        rows.append(f"| {mesh} | {cs[0]['n_tets']:,} | {name} | {cut} | {max(c['max_abs_diff'] for c in cs):.1e} "
+                    f"| {max(c['whole_max_err_vs_ref'] for c in cs):.1e} | {min(d):+.2f} .. {max(d):+.2f} |")
+    size = "x".join(str(x) for x in r["size"])
+    return (f"{size}; P = 2, 4, 8; perspective, parallel and the eye inside: the worst of the 9 "
+            f"(`bench/results/distributed.json`).\n\n" + "\n".join(rows))
+
+
+#: What the projection assumes beyond the measurements.
+PROJECTION_PIXELS = 1024 * 1024
+PROJECTION_LINK_BYTES_PER_S = 1.25e9  # 10 Gb/s Ethernet
+PROJECTION_TETS = 1e9
+
+
+def distributed_projection() -> str:
+    """64 and 1,024 workers on a 10^9-tet mesh, on paper from the measured costs."""
+    r = _dist()
+    one = min(r["bricks"], key=lambda x: abs(x["n_tets"] - 1e6))
+    p1 = one["P"]["1"]
+    px = one["size"][0] * one["size"][1]
+    # A view's cost grows with the cells and with the pixels; taken here as proportional to
+    # their geometric mean (segments per tet fall as tets shrink on screen): a rough model.
+    s_per_unit = p1["view_change_median_s"] / (one["n_tets"] * px) ** 0.5
+    mib_per_tet = (max(p1["worker_peak_rss_mib"]) - max(p1["worker_start_rss_mib"])) / one["n_tets"]
+    ns_comp = max(v["ns_per_pixel_per_brick"] for v in r["composite"].values())
+    image_bytes = 16 * PROJECTION_PIXELS
+    rows = ["| workers | tets per worker | render per view, each worker s | memory per worker GiB "
+            "| compositing on the client s | images to the client s | binary swap: compositing s "
+            "| binary swap: network s |",
+            "|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for w in (64, 1024):
+        n = PROJECTION_TETS / w
+        render = s_per_unit * (n * PROJECTION_PIXELS) ** 0.5
+        mem = mib_per_tet * n / 1024
+        client = w * PROJECTION_PIXELS * ns_comp * 1e-9
+        net = w * image_bytes / PROJECTION_LINK_BYTES_PER_S
+        # Binary swap: log2(w) rounds, each worker sending and compositing half of what it
+        # holds; summed over the rounds, less than one image each way per worker.
+        swap_comp = PROJECTION_PIXELS * ns_comp * 1e-9
+        swap_net = image_bytes / PROJECTION_LINK_BYTES_PER_S
+        rows.append(f"| {w:,} | {n / 1e6:.1f}M | {render:.1f} | {mem:.1f} | {client:.1f} | {net:.1f} "
+                    f"| {swap_comp:.3f} | {swap_net:.3f} |")
+    return (f"A 10^9-tet mesh, a 1024x1024 float32 RGBA image (16 MiB per brick), 10 Gb/s links; from the "
+            f"{one['n_tets']:,}-tet mesh on one worker ({p1['view_change_median_s']:.2f} s per view at "
+            f"{one['size'][0]}x{one['size'][1]}, {mib_per_tet * 1e6:.0f} MiB per million tets above the idle "
+            f"worker) and {ns_comp:.1f} ns per pixel per brick of compositing ({_when(r)}).\n\n" + "\n".join(rows))
+
+
+def volume_accuracy() -> str:
+    """The volume ray caster's defaults (and the commit before its "auto" sizing) against
+    the reference at fine settings, with finer settings (bench/volume_accuracy.py)."""
+    r = _load("volume_accuracy.json")
+    rows = ["| volume | mode | default: PSNR (dB) | max error | pixels > 1/255 | step (voxels) | integration "
+            "| frame (ms) | before: PSNR (dB) | max error | frame (ms) | finest: PSNR (dB) | frame (ms) |",
+            "|---|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|"]
+    for s in r["scenes"]:
+        v = s["variants"]
+        d = v["default"]
+        before = next((x for k, x in v.items() if k.startswith("before")), None)
+        fine = v[next(k for k in v if k.startswith("fine") or k == "step 1/16 voxel")]
+        how = d.get("integration", "-")
+        if how == "table":
+            how = f"table, {d['table_scalar_bins']} bins"
+        b = (f"{before['psnr']:.1f} | {before['max_error']:.4f} | {before['frame_s'] * 1e3:.0f}" if before
+             else "- | - | -")
+        rows.append(f"| {s['scene']} ({'x'.join(map(str, s['dims']))} {s['dtype']}) "
+                    f"| {s['mode'].replace('emission_absorption', 'emission-absorption')} | {d['psnr']:.1f} "
+                    f"| {d['max_error']:.4f} | {d['pixels_beyond_1_255']} of {d['covered_pixels']} "
+                    f"| {d['step_voxels']:.3g} | {how} | {d['frame_s'] * 1e3:.0f} | {b} "
+                    f"| {fine['psnr']:.1f} | {fine['frame_s'] * 1e3:.0f} |")
+    size = "x".join(str(x) for x in r["size"])
+    before = next((k for s in r["scenes"] for k in s["variants"] if k.startswith("before")), "before")
+    return (f"Measured by `bench/volume_accuracy.py` at {size} against the CPU reference at 1/16-voxel pieces "
+            f"({r['created']}, {r['gl'].get('GL_RENDERER', '?')}, `bench/results/volume_accuracy.json`; frame: wall "
+            f"time, median of {r['repeats']}, variants interleaved). Before: the defaults of {before[8:-1] or 'the commit before'}"
+            f" (half-voxel steps, a 256-bin table, 8-bit textures, termination 0.99); finest: 1/8-voxel steps, "
+            f"exact integration and no early termination (MIP: 1/16-voxel steps).\n\n" + "\n".join(rows))
+
+
 def viewer_latency() -> str:
     """The Jupyter viewer's latency in Chromium, from the input event to pixels on the page
     (bench/viewer.py)."""
@@ -132,7 +268,11 @@ def viewer_latency() -> str:
 
 
 TABLES: dict[str, Callable[[], str]] = {"viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages,
-                                        "spiky_tf": spiky_tf}
+                                        "volume_accuracy": volume_accuracy,
+                                        "spiky_tf": spiky_tf, "distributed_series": distributed_series,
+                                        "distributed_bricks": distributed_bricks,
+                                        "distributed_accuracy": distributed_accuracy,
+                                        "distributed_projection": distributed_projection}
 _BLOCK = re.compile(r"(<!-- table:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /table:(?P=name) -->)", re.S)
 
 
