@@ -58,9 +58,12 @@ def _common():
 
 
 def _peak_rss_mib() -> float:
-    import resource
-
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
+    """This process's peak resident memory (VmHWM: not ru_maxrss, which a spawned worker
+    inherits from the process that started it, across exec)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return float(line.split()[1]) / 1024.0  # kB
+    return float("nan")
 
 
 def series(args: argparse.Namespace) -> dict:
