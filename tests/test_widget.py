@@ -184,6 +184,11 @@ class RecordingRenderer:
         self.calls.append(dict(mesh=mesh, camera=camera, tf=tf, size=size, order=order))
         return np.zeros((size[1], size[0], 4), np.float32)
 
+    def fuse(self, mesh, volume, camera, tf, volume_tf, *, size, mode):
+        self.calls.append(dict(mesh=mesh, volume=volume, camera=camera, tf=tf, volume_tf=volume_tf, size=size,
+                               mode=mode))
+        return np.zeros((size[1], size[0], 4), np.float32)
+
     def release(self):
         pass
 
@@ -452,8 +457,8 @@ def test_render_loop_previews_transfer_function_edits_with_the_small_table(tmp_p
     model = ViewerModel(_scene(tmp_path), renderer=SlowRenderer(0.02))
     seen = []
     real = model.draw
-    model.draw = lambda *a, preview_table=False: seen.append((a[3].final, preview_table)) or real(
-        *a, preview_table=preview_table)
+    model.draw = lambda *a, preview_table=False, **kw: seen.append((a[3].final, preview_table)) or real(
+        *a, preview_table=preview_table, **kw)
     loop = RenderLoop(model, lambda f: None, settle_s=0.1)
     try:
         loop.update(final=True)
@@ -701,3 +706,70 @@ def test_process_renderer_draws_what_the_renderer_draws_and_reports_its_errors()
         remote.render(scene.mesh, cams[0], scene.tf, size=(40, 30))
     with pytest.raises(TypeError, match="RenderSettings"):
         ProcessRenderer({"method": "auto"})
+
+
+def _volume():
+    g = np.linspace(-1.0, 1.0, 12)
+    z, y, x = np.meshgrid(g, g, g, indexing="ij")
+    return tetvr.Volume.from_array(np.sqrt(x**2 + y**2 + z**2).astype(np.float32), spacing=(2 / 11,) * 3,
+                                   origin=(-1.0, -1.0, -1.0))
+
+
+def test_viewer_fuses_a_volume_with_its_own_editor_and_mode_picker(tmp_path):
+    pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
+    from tetvr.widget import FUSION_PICKER
+    from tetvr.widget_jupyter import HIST_SIZE
+
+    vol = _volume()
+    rec = RecordingRenderer()
+    v = _viewer(tmp_path, rec, volume=vol, fusion="overlay")
+    try:
+        assert v.loop.wait_idle(10)
+        last = rec.calls[-1]
+        assert last["volume"] is vol and last["mode"] == "overlay" and last["size"] == (80, 60)
+        assert last["volume_tf"].domain == pytest.approx(vol.scalar_range)
+        v.fusion.value = "cutaway"
+        assert v.loop.wait_idle(10) and rec.calls[-1]["mode"] == "cutaway"
+        assert tuple(v.fusion.options) == FUSION_PICKER
+        # The volume's editor edits the volume's transfer function only.
+        mesh_tf, vol_tf = rec.calls[-1]["tf"], rec.calls[-1]["volume_tf"]
+        _drag(v.volume_panel.event, [(HIST_SIZE[0] * 0.5, HIST_SIZE[1] * 0.5), (HIST_SIZE[0] * 0.5, HIST_SIZE[1] * 0.2)])
+        assert v.loop.wait_idle(10)
+        assert rec.calls[-1]["tf"] == mesh_tf and rec.calls[-1]["volume_tf"] != vol_tf
+        assert len(v.model.volume_editor.points) == 3 and v.volume_panel.frame().shape == (HIST_SIZE[1] + 14,
+                                                                                          HIST_SIZE[0], 3)
+        with pytest.raises(ValueError, match="fusion mode"):
+            v.model.set_fusion("ray_textures")  # needs per-pixel images the viewer has no way to take
+        with pytest.raises(TypeError, match="tetvr.Volume"):
+            v.model.set_volume(np.zeros((4, 4, 4)))
+    finally:
+        v.close()
+
+
+@pytest.mark.gl
+def test_fused_frames_from_the_render_process_equal_tetvr_fuse():
+    from tetvr.fuse import fuse
+    from tetvr.widget import ViewerModel
+    from tetvr.widget_process import ProcessRenderer
+
+    mesh = synthetic.cube(2)
+    vol = _volume()
+    cam = Camera.fit(mesh, zoom=0.6)
+    model = ViewerModel(tetvr.widget.scene_of(mesh, size=(32, 24)), renderer="process")
+    try:
+        model.set_volume(vol, mode="interleave")
+        model.control.set(cam)
+        got = model.final()
+        want = fuse(mesh, vol, cam, model.editor.transfer_function(), model.volume_editor.transfer_function(),
+                    size=(32, 24), mode="interleave")
+        assert isinstance(model.renderer, ProcessRenderer) and np.array_equal(got, want)
+        assert got[..., 3].max() > 0.05  # the volume shows
+        inproc = ViewerModel(tetvr.widget.scene_of(mesh, size=(32, 24)))
+        try:
+            inproc.set_volume(vol, mode="interleave")
+            inproc.control.set(cam)
+            assert np.array_equal(inproc.final(), want)  # the in-process renderer fuses the same
+        finally:
+            inproc.close()
+    finally:
+        model.close()

@@ -58,6 +58,7 @@ __all__ = [
     "log_histogram",
     "nice_ticks",
     "scene_of",
+    "FUSION_PICKER",
     "png_bytes",
     "list_fields",
     "run_desktop",
@@ -273,6 +274,9 @@ class ProgressiveRefiner:
 from .widget_editor import (HistogramPicker, TransferFunctionEditor, histogram_image,  # noqa: E402
                             legend_image, log_histogram, nice_ticks)
 
+#: Fusion modes the viewer offers (``ray_textures`` needs per-pixel images from the user).
+FUSION_PICKER = ("interleave", "overlay", "cutaway")
+
 #: The full frame's size when the viewer is given a mesh rather than a scene.
 DEFAULT_SIZE = (560, 420)
 _SCENE_SUFFIXES = (".json", ".pvsm")
@@ -355,6 +359,10 @@ class ViewerModel:
         self.last_request: RenderRequest | None = None
         self.last_seconds = 0.0
         self._meshes: dict[str, TetMesh] = {}
+        self._raycaster: Any = None  # the fused scene's volume ray caster (in-process renderer)
+        self.volume: Any = None
+        self.volume_editor: TransferFunctionEditor | None = None
+        self.fusion = "interleave"
         self.load(scene)
 
     # ---- scene in, scene out ----
@@ -424,6 +432,49 @@ class ViewerModel:
     def set_colormap(self, name: str) -> None:
         self.editor.set_colormap(name)
 
+    def set_volume(self, volume: Any, tf: TransferFunction | None = None, *, mode: str | None = None) -> None:
+        """Show an image volume around the mesh (a :class:`tetvr.Volume`; ``None`` removes
+        it), fused by ``mode`` (:data:`FUSION_PICKER`, see :mod:`tetvr.fuse`). ``tf``
+        defaults to grey levels over the volume's range with a linear opacity ramp."""
+        if volume is None:
+            self.volume = self.volume_editor = None
+            return
+        from .colormaps import colormap
+        from .volume import Volume
+
+        if not isinstance(volume, Volume):
+            raise TypeError(f"volume must be a tetvr.Volume or None, got {type(volume).__name__}")
+        if mode is not None:
+            self.set_fusion(mode)
+        if tf is None:
+            lo, hi = volume.scalar_range
+            tf = colormap("grayscale", (lo, hi if hi > lo else lo + 1.0), opacity=[(0.0, 0.0), (1.0, 0.4)],
+                          unit_distance=volume.diagonal / 10)
+        elif not isinstance(tf, TransferFunction):
+            raise TypeError(f"volume_tf must be a TransferFunction or None, got {type(tf).__name__}")
+        self.volume = volume
+        self.volume_editor = TransferFunctionEditor.from_transfer_function(tf)
+
+    def set_fusion(self, mode: str) -> None:
+        if mode not in FUSION_PICKER:
+            raise ValueError(f"fusion mode must be one of {FUSION_PICKER}, got {mode!r}")
+        self.fusion = mode
+
+    def fusion_state(self) -> tuple[Any, TransferFunction, str] | None:
+        """What :meth:`draw` needs of the volume: ``(volume, volume_tf, mode)``, or None."""
+        if self.volume is None or self.volume_editor is None:
+            return None
+        return self.volume, self.volume_editor.transfer_function(), self.fusion
+
+    def volume_log_counts(self, bins: int = 72) -> NDArray[np.float64]:
+        """The volume's log histogram over its editor's range (computed once per range)."""
+        assert self.volume is not None and self.volume_editor is not None
+        key = ("<volume>", self.volume_editor.scalar_range, bins)
+        if key not in self.hist_cache:
+            values = np.asarray(self.volume.data).ravel()
+            self.hist_cache[key] = log_histogram(values, self.volume_editor.scalar_range, bins)[0]
+        return self.hist_cache[key]
+
     # ---- frames ----
     @property
     def renderer(self) -> Any:
@@ -440,7 +491,7 @@ class ViewerModel:
 
     def render(self, request: RenderRequest) -> NDArray[np.float32]:
         """Draw what ``request`` asks for, of the current state."""
-        return self.draw(self.mesh, self.camera, self.editor.transfer_function(), request)
+        return self.draw(self.mesh, self.camera, self.editor.transfer_function(), request, fusion=self.fusion_state())
 
     @property
     def preview_settings(self) -> RenderSettings:
@@ -450,9 +501,11 @@ class ViewerModel:
         return dataclasses.replace(self.settings, table_scalar_bins=64, table_thickness_slices=8)
 
     def draw(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, request: RenderRequest, *,
-             preview_table: bool = False) -> NDArray[np.float32]:
+             preview_table: bool = False, fusion: tuple[Any, TransferFunction, str] | None = None
+             ) -> NDArray[np.float32]:
         """Draw ``request`` of an explicit state (the render loop's snapshot of it);
-        ``preview_table``: with :attr:`preview_settings`."""
+        ``preview_table``: with :attr:`preview_settings`; ``fusion``: with the volume
+        (:meth:`fusion_state`)."""
         from .method import choose
         from .sort import visibility_order
 
@@ -460,6 +513,11 @@ class ViewerModel:
         renderer = self.renderer
         if hasattr(renderer, "settings") and self._own_renderer:
             renderer.settings = self.preview_settings if preview_table and not request.final else self.settings
+        if fusion is not None:
+            image = self._fuse(renderer, mesh, camera, tf, fusion, request.size)
+            self.last_seconds = time.perf_counter() - t0
+            self.last_request = request
+            return image
         order = None  # tet marching needs no order
         if choose(self.settings, mesh) == "projected":
             # Projected tetrahedra: previews reuse the last order; refined frames sort anew.
@@ -470,6 +528,19 @@ class ViewerModel:
         self.last_seconds = time.perf_counter() - t0
         self.last_request = request
         return image
+
+    def _fuse(self, renderer: Any, mesh: TetMesh, camera: Camera, tf: TransferFunction,
+              fusion: tuple[Any, TransferFunction, str], size: tuple[int, int]) -> NDArray[np.float32]:
+        volume, volume_tf, mode = fusion
+        if hasattr(renderer, "fuse"):  # the render process (or a test's stand-in)
+            return renderer.fuse(mesh, volume, camera, tf, volume_tf, size=size, mode=mode)  # type: ignore[no-any-return]
+        from .fuse import fuse
+        from .gl.raycaster import Raycaster
+
+        if self._raycaster is None:
+            self._raycaster = Raycaster(ctx=renderer.ctx)
+        return fuse(mesh, volume, camera, tf, volume_tf, size=size, mode=mode, renderer=renderer,
+                    raycaster=self._raycaster)
 
     def changed(self, *, camera: bool = True) -> NDArray[np.float32]:
         """Something changed: the preview frame."""
@@ -485,6 +556,9 @@ class ViewerModel:
         return self.render(self.refiner.finish())
 
     def close(self) -> None:
+        if self._raycaster is not None:
+            self._raycaster.release()
+            self._raycaster = None
         if self._own_renderer and self._renderer is not None:
             self._renderer.release()
         self._renderer = None

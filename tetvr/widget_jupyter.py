@@ -39,7 +39,7 @@ from .image import png_bytes, to_rgba8
 from .mesh import TetMesh
 from .scene import Scene
 from .transfer import PRESETS
-from .widget import PICKER_COLORMAPS, ViewerModel, _colormap_choice, _has_matplotlib
+from .widget import FUSION_PICKER, PICKER_COLORMAPS, ViewerModel, _colormap_choice, _has_matplotlib
 from .widget_editor import HistogramPicker, legend_image, nice_ticks
 from .widget_loop import Frame, RenderLoop
 
@@ -72,6 +72,63 @@ class _Canvas(RemoteFrameBuffer):  # type: ignore[misc]
         self._events(event)
 
 
+class _EditorPanel:
+    """A transfer-function editor on a histogram, as a frame buffer with value ticks under it.
+
+    ``editor`` and ``log_counts`` are called for the current editor and its histogram
+    (they change with the field or a loaded scene); edits go through ``viewer._edit``."""
+
+    def __init__(self, viewer: "Viewer", editor: Callable[[], Any], log_counts: Callable[[], NDArray[np.float64]],
+                 css_class: str) -> None:
+        self.viewer = viewer
+        self._editor = editor
+        self._log_counts = log_counts
+        self.picker = HistogramPicker(editor(), size=HIST_SIZE)
+        self.canvas = _Canvas(self.frame, self.event, css_width=f"{HIST_SIZE[0] + 2}px",
+                              css_height=f"{HIST_SIZE[1] + LEGEND_HEIGHT + 2}px", resizable=False, cursor="crosshair")
+        self.canvas.add_class(css_class)
+        self.ticks = w.HTML(layout=w.Layout(width=f"{HIST_SIZE[0] + 2}px", height="20px"))
+
+    def frame(self) -> NDArray[np.uint8]:
+        with self.viewer.loop.lock:
+            ed = self._editor()
+            tf = ed.transfer_function()
+            picture = ed.image(None, size=HIST_SIZE, selected=self.picker.selected, log_counts=self._log_counts())
+            lo, hi = ed.scalar_range
+        legend = legend_image(tf, (lo, hi), size=(HIST_SIZE[0], LEGEND_HEIGHT), ticks=nice_ticks(lo, hi))
+        return np.ascontiguousarray(to_rgba8(np.concatenate([picture, legend]))[..., :3])
+
+    def event(self, event: dict[str, Any]) -> None:
+        kind = event.get("type") or event.get("event_type")
+        x, y = float(event.get("x", 0.0)), float(event.get("y", 0.0))
+        picker = self.picker
+        if kind == "pointer_down" and y < HIST_SIZE[1]:
+            self.viewer._edit(self, lambda: picker.press(x, y))
+        elif kind == "pointer_move" and picker.dragging:
+            self.viewer._edit(self, lambda: picker.move(x, y))
+        elif kind == "pointer_up":
+            if picker.dragging:
+                self.viewer.loop.settle()  # the edit is over: the full frame now
+            picker.release()
+        elif kind == "double_click" and y < HIST_SIZE[1]:
+            self.viewer._edit(self, lambda: picker.double_click(x, y))
+
+    def sync(self) -> None:
+        """Follow the current editor (after a load or a field change): ticks and picture."""
+        ed = self._editor()
+        if self.picker.editor is not ed:
+            self.picker.editor = ed
+            self.picker.selected = 0
+        lo, hi = ed.scalar_range
+        spans = []
+        for t in nice_ticks(lo, hi):
+            left = (t - lo) / (hi - lo) * (HIST_SIZE[0] - 1)
+            spans.append(f'<span style="position:absolute;left:{left:.0f}px;transform:translateX(-50%);'
+                         f'font-size:11px">{t:.4g}</span>')
+        self.ticks.value = f'<div style="position:relative;height:18px;margin-left:1px">{"".join(spans)}</div>'
+        self.canvas.request_draw()
+
+
 class Viewer:
     """A scene in Jupyter: drag to orbit, shift- or right-drag to pan, wheel to zoom; edit
     the transfer function on the histogram; pick the field and colour map; save and load
@@ -85,7 +142,13 @@ class Viewer:
     settle_s : quiet time after the last input before the full frame is drawn.
     preview_budget_s : the render time previews aim for; their size follows the measured
         cost of the frames before.
-    renderer : anything with ``render(mesh, camera, tf, size=, order=)``; by default
+    volume, volume_tf, fusion : an image volume (:class:`tetvr.Volume`, e.g. the CT the
+        mesh was made from) shown around the mesh, its transfer function (default: grey
+        levels with an opacity ramp) and the fusion mode (:data:`tetvr.widget.FUSION_PICKER`,
+        see :mod:`tetvr.fuse`); the viewer then has a second histogram editor and a
+        fusion picker.
+    renderer : anything with ``render(mesh, camera, tf, size=, order=)`` (and
+        ``fuse(...)`` for a volume); by default
         (``"process"``) a :class:`tetvr.gl.Renderer` in a child process
         (:mod:`tetvr.widget_process`: moderngl holds the interpreter lock while it draws,
         which would stop the kernel's input and output for the length of each frame);
@@ -101,10 +164,12 @@ class Viewer:
 
     def __init__(self, scene: Scene | TetMesh | str | os.PathLike[str], *, size: tuple[int, int] | None = None,
                  settle_s: float = 0.25, preview_budget_s: float = 0.06, step_degrees: float = 15.0,
+                 volume: Any = None, volume_tf: Any = None, fusion: str = "interleave",
                  renderer: Any = "process") -> None:
         from .widget import scene_of
 
         self.model = ViewerModel(scene_of(scene, size=size), renderer=renderer, settle_s=settle_s)
+        self.model.set_volume(volume, volume_tf, mode=fusion)
         self.step_degrees = float(step_degrees)
         self._closed = False
         self._aspect = self.model.size[0] / self.model.size[1]
@@ -135,12 +200,16 @@ class Viewer:
         self.status.add_class("tetvr-status")
         image_box = w.VBox([self.canvas, self.status],
                            layout=w.Layout(width=f"{width + 2}px", max_width="100%", min_width="120px"))
-        self._hist_dirty = True
-        self.hist = _Canvas(self._hist_frame, self._hist_event, css_width=f"{HIST_SIZE[0] + 2}px",
-                            css_height=f"{HIST_SIZE[1] + LEGEND_HEIGHT + 2}px", resizable=False, cursor="crosshair")
-        self.hist.add_class("tetvr-hist")
-        self.picker = HistogramPicker(m.editor, size=HIST_SIZE)
-        self.ticks = w.HTML(layout=w.Layout(width=f"{HIST_SIZE[0] + 2}px", height="20px"))
+        self.tf_panel = _EditorPanel(self, lambda: self.model.editor, lambda: self.model.log_counts(), "tetvr-hist")
+        self.hist, self.picker = self.tf_panel.canvas, self.tf_panel.picker
+        self.volume_panel: _EditorPanel | None = None
+        volume_box: list[Any] = []
+        if m.volume is not None:
+            self.volume_panel = _EditorPanel(self, lambda: self.model.volume_editor,
+                                             lambda: self.model.volume_log_counts(), "tetvr-volume-hist")
+            self.fusion = w.Dropdown(options=FUSION_PICKER, value=m.fusion, description="fusion")
+            self.fusion.observe(lambda c: self._guard(lambda: self._on_fusion(c["new"])), names="value")
+            volume_box = [self.fusion, w.HTML("<b>volume</b>"), self.volume_panel.canvas, self.volume_panel.ticks]
         self.field = w.Dropdown(options=m.fields, value=m.field, description="field")
         cmaps = tuple(c for c in PICKER_COLORMAPS if c in PRESETS or _has_matplotlib())
         options, initial = _colormap_choice(cmaps, m.editor.colormap)
@@ -176,12 +245,14 @@ class Viewer:
                           names="value")
         for box in (self.lo, self.hi):
             box.observe(lambda _c: self._guard(self._on_range), names="value")
-        side = w.VBox([nav, self.field, self.colormap, self.unit, self.hist, self.ticks,
-                       w.HBox([self.lo, self.hi], layout=w.Layout(flex_flow="row wrap")), files],
+        side = w.VBox([nav, self.field, self.colormap, self.unit, w.HTML("<b>mesh</b>"), self.hist, self.tf_panel.ticks,
+                       w.HBox([self.lo, self.hi], layout=w.Layout(flex_flow="row wrap")), *volume_box, files],
                       layout=w.Layout(min_width="0", max_width="100%"))
         self.widget = w.HBox([image_box, side], layout=w.Layout(flex_flow="row wrap", width="100%"))
         self.widget.add_class("tetvr-viewer")
         self._sync_ticks()
+        if self.volume_panel is not None:
+            self.volume_panel.sync()
 
     # ---- display ----
     def _repr_mimebundle_(self, **kw: Any) -> Any:  # pragma: no cover - needs a front-end
@@ -227,7 +298,10 @@ class Viewer:
             self._last_full = frame
         kind = "full" if frame.final else "preview"
         text = f"{kind} {frame.size[0]}×{frame.size[1]} · {frame.seconds * 1e3:.0f} ms"
-        self._post(lambda: (self.canvas.request_draw(), self._set_status(text, final=frame.final)))
+        def show() -> None:
+            self.canvas.request_draw()
+            self._set_status(text, final=frame.final)
+        self._post(show)
 
     def _image_frame(self) -> NDArray[np.uint8] | None:
         with self._slot_lock:
@@ -307,37 +381,22 @@ class Viewer:
             self.canvas.request_draw()  # a new view: send it the last frame
 
     # ---- transfer-function editor ----
-    def _hist_frame(self) -> NDArray[np.uint8] | None:
-        m = self.model
-        with self.loop.lock:
-            tf = m.editor.transfer_function()
-            picture = m.editor.image(None, size=HIST_SIZE, selected=self.picker.selected,
-                                     log_counts=m.log_counts())
-            lo, hi = m.editor.scalar_range
-        legend = legend_image(tf, (lo, hi), size=(HIST_SIZE[0], LEGEND_HEIGHT), ticks=nice_ticks(lo, hi))
-        return np.ascontiguousarray(to_rgba8(np.concatenate([picture, legend]))[..., :3])
+    def _hist_frame(self) -> NDArray[np.uint8]:
+        return self.tf_panel.frame()
 
     def _hist_event(self, event: dict[str, Any]) -> None:
-        kind = event.get("type") or event.get("event_type")
-        x, y = float(event.get("x", 0.0)), float(event.get("y", 0.0))
-        if kind == "pointer_down" and y < HIST_SIZE[1]:
-            self._edit(lambda: self.picker.press(x, y))
-        elif kind == "pointer_move" and self.picker.dragging:
-            self._edit(lambda: self.picker.move(x, y))
-        elif kind == "pointer_up":
-            if self.picker.dragging:
-                self.loop.settle()
-            self.picker.release()
-        elif kind == "double_click" and y < HIST_SIZE[1]:
-            self._edit(lambda: self.picker.double_click(x, y))
+        self.tf_panel.event(event)
 
-    def _edit(self, change: Callable[[], bool]) -> None:
-        """A histogram edit: opacity points only, so no re-sort and no histogram pass."""
+    def _edit(self, panel: _EditorPanel, change: Callable[[], bool]) -> None:
+        """A histogram edit: transfer-function points only, so no re-sort and no histogram pass."""
         with self.loop.lock:
             changed = change()
             if changed:
                 self.loop.update(camera=False)
-        self.hist.request_draw()  # the selection may have moved even when the points did not
+        panel.canvas.request_draw()  # the selection may have moved even when the points did not
+
+    def _on_fusion(self, mode: str) -> None:
+        self.loop.update(lambda m: m.set_fusion(mode), camera=False)
 
     def _tf(self, change: Callable[[Any], Any]) -> None:
         if self._syncing:
@@ -347,13 +406,7 @@ class Viewer:
         self.hist.request_draw()
 
     def _sync_ticks(self) -> None:
-        lo, hi = self.model.editor.scalar_range
-        spans = []
-        for t in nice_ticks(lo, hi):
-            left = (t - lo) / (hi - lo) * (HIST_SIZE[0] - 1)
-            spans.append(f'<span style="position:absolute;left:{left:.0f}px;transform:translateX(-50%);'
-                         f'font-size:11px">{t:.4g}</span>')
-        self.ticks.value = f'<div style="position:relative;height:18px;margin-left:1px">{"".join(spans)}</div>'
+        self.tf_panel.sync()
 
     def _on_field(self, name: str) -> None:
         if self._syncing:
@@ -393,8 +446,6 @@ class Viewer:
             m.size = size  # the picture keeps its place on the page
         self.loop.update(load, camera=True, final=True)
         m = self.model
-        self.picker.editor = m.editor
-        self.picker.selected = 0
         self._syncing = True
         try:
             self.field.options = m.fields

@@ -264,7 +264,7 @@ class RenderLoop:
             size = full if final else self.sizer.size(full)  # type: ignore[arg-type]
             sort = self._camera_moved and final
             request = RenderRequest(size, sort=sort, final=final)  # type: ignore[arg-type]
-            state = (m.mesh, m.camera, m.editor.transfer_function(), self._tf_changed and not final)
+            state = (m.mesh, m.camera, m.editor.transfer_function(), self._tf_changed and not final, m.fusion_state())
             revision, wanted_at = self._revision, self._first_unanswered
             self._first_unanswered = None
             if final:
@@ -286,10 +286,10 @@ class RenderLoop:
             job = self._next()
             if job is None:
                 return
-            request, (mesh, camera, tf, small_table), revision, wanted_at = job
+            request, (mesh, camera, tf, small_table, fusion), revision, wanted_at = job
             t0 = time.perf_counter()
             try:
-                image = self.model.draw(mesh, camera, tf, request, preview_table=small_table)
+                image = self.model.draw(mesh, camera, tf, request, preview_table=small_table, fusion=fusion)
                 error = None
             except Exception as exc:  # noqa: BLE001 - shown in the viewer, not swallowed
                 image, error = None, f"{type(exc).__name__}: {exc}"

@@ -50,7 +50,9 @@ def _serve(inbox: Connection, conn: Connection) -> None:  # pragma: no cover - r
     from .gl.renderer import Renderer
 
     renderer = None
-    mesh = None
+    raycaster = None
+    mesh: Any = None
+    volume: Any = None
     try:
         settings = inbox.recv()
         renderer = Renderer(settings)
@@ -66,8 +68,19 @@ def _serve(inbox: Connection, conn: Connection) -> None:  # pragma: no cover - r
                     mesh = msg["mesh"]
                 if "settings" in msg and msg["settings"] != renderer.settings:
                     renderer.settings = msg["settings"]  # a preview's small table, or back
+                if "volume" in msg:
+                    volume = msg["volume"]
                 if msg.get("op") == "gpu_bytes":
                     conn.send(("ok", renderer.gpu_bytes()))
+                    continue
+                if msg.get("op") == "fuse":
+                    from .fuse import fuse
+                    from .gl.raycaster import Raycaster
+
+                    if raycaster is None:
+                        raycaster = Raycaster(ctx=renderer.ctx)
+                    conn.send(("ok", fuse(mesh, volume, msg["camera"], msg["tf"], msg["volume_tf"], size=msg["size"],
+                                          mode=msg["mode"], renderer=renderer, raycaster=raycaster)))
                     continue
                 image = renderer.render(mesh, msg["camera"], msg["tf"], size=msg["size"], order=msg["order"])
                 conn.send(("ok", image))
@@ -79,6 +92,8 @@ def _serve(inbox: Connection, conn: Connection) -> None:  # pragma: no cover - r
         except OSError:
             pass
     finally:
+        if raycaster is not None:
+            raycaster.release()
         if renderer is not None:
             renderer.release()
 
@@ -101,6 +116,7 @@ class ProcessRenderer:
         self._proc: Any = None
         self._conn: Any = None
         self._sent_mesh: TetMesh | None = None
+        self._sent_volume: Any = None
         self._released = False
 
     def _start(self) -> None:
@@ -118,7 +134,7 @@ class ProcessRenderer:
             os.close(from_child_w)
         self._proc = proc
         self._conn = (Connection(to_child_w, readable=False), Connection(from_child_r, writable=False))
-        self._sent_mesh = None
+        self._sent_mesh = self._sent_volume = None
         self._conn[0].send(self.settings)
 
     def _call(self, msg: dict[str, Any]) -> Any:
@@ -149,6 +165,22 @@ class ProcessRenderer:
             self._sent_mesh = mesh
             return image  # type: ignore[no-any-return]
 
+    def fuse(self, mesh: TetMesh, volume: Any, camera: Camera, tf: TransferFunction, volume_tf: TransferFunction, *,
+             size: tuple[int, int] = (512, 512), mode: str = "interleave") -> NDArray[np.float32]:
+        """The mesh inside an image volume, as :func:`tetvr.fuse.fuse` draws it (the volume
+        crosses the pipe once, as the mesh does)."""
+        with self._lock:
+            msg: dict[str, Any] = {"op": "fuse", "camera": camera, "tf": tf, "volume_tf": volume_tf,
+                                   "size": tuple(size), "mode": mode, "settings": self.settings}
+            fresh = not self.alive
+            if fresh or mesh is not self._sent_mesh:
+                msg["mesh"] = mesh
+            if fresh or volume is not self._sent_volume:
+                msg["volume"] = volume
+            image = self._call(msg)
+            self._sent_mesh, self._sent_volume = mesh, volume
+            return image  # type: ignore[no-any-return]
+
     def gpu_bytes(self) -> int:
         """GPU memory held by the child's renderer (0 before the first frame)."""
         with self._lock:
@@ -162,7 +194,7 @@ class ProcessRenderer:
 
     def _stop(self, timeout: float = 10.0) -> None:
         proc, conn = self._proc, self._conn
-        self._proc = self._conn = self._sent_mesh = None
+        self._proc = self._conn = self._sent_mesh = self._sent_volume = None
         if conn is not None:
             try:
                 conn[0].send(None)
