@@ -7,6 +7,7 @@ import os
 import stat
 import sys
 import warnings
+from typing import Any
 
 __all__ = ["check_input_file", "check_instances", "short_path", "warn"]
 
@@ -16,7 +17,8 @@ _PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
 def warn(message: str, category: type[Warning] = UserWarning) -> None:
     """``warnings.warn`` attributed to the first caller outside tetvr: the file and line a
     warning shows are the user's (their script, their notebook cell), never tetvr's own."""
-    level, frame = 2, sys._getframe(1)
+    level = 2
+    frame: Any = sys._getframe(1)
     while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE):
         frame, level = frame.f_back, level + 1
     warnings.warn(message, category, stacklevel=level)
