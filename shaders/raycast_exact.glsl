@@ -4,15 +4,10 @@
 // form (optical depth) and by 3-point Gauss-Legendre quadrature (colour), as
 // tetvr.optics.integrate_pieces does in float64 (the same exact model, tau = -ln(1 - a) / u).
 //
-// In:  u_tf_points, u_tf_count: the transfer function's control points (the union of the
-//      colour and opacity points, ascending), one texel each: row 0 (scalar, opacity, 0, 0),
-//      row 1 (r, g, b, 0); both maps are linear between two points and constant beyond
-//      the ends. u_inv_unit_distance: 1 / the transfer function's unit distance.
-// Out: tf_point_at (the transfer function at a scalar, with its interval) and
-//      integrate_piece (premultiplied RGBA of a piece seen from its front).
+// In:  raycast_sample.glsl's transfer function (tf_point_at, tf_point: its control points);
+//      u_inv_unit_distance: 1 / the transfer function's unit distance.
+// Out: integrate_piece (premultiplied RGBA of a piece seen from its front).
 
-uniform sampler2D u_tf_points;
-uniform int u_tf_count;
 uniform float u_inv_unit_distance;
 
 #define MAX_OPACITY (1.0 - 1e-6)
@@ -20,26 +15,6 @@ uniform float u_inv_unit_distance;
 // by at most 2x (as the reference), at most MAX_PARTS of them.
 #define SUB_THETA 0.5
 #define MAX_PARTS 16
-
-// The transfer function at scalar s: (r, g, b, a), and in *interval the number of
-// control points <= s (0 .. u_tf_count), found by bisection.
-vec4 tf_point_at(float s, out int interval) {
-    int lo = 0, hi = u_tf_count;  // the answer is in [lo, hi]
-    while (lo < hi) {
-        int mid = (lo + hi) >> 1;
-        if (texelFetch(u_tf_points, ivec2(mid, 0), 0).x <= s) lo = mid + 1; else hi = mid;
-    }
-    interval = lo;
-    int i0 = max(lo - 1, 0), i1 = min(lo, u_tf_count - 1);
-    vec4 p0 = texelFetch(u_tf_points, ivec2(i0, 0), 0), p1 = texelFetch(u_tf_points, ivec2(i1, 0), 0);
-    vec3 c0 = texelFetch(u_tf_points, ivec2(i0, 1), 0).rgb, c1 = texelFetch(u_tf_points, ivec2(i1, 1), 0).rgb;
-    float f = p1.x > p0.x ? clamp((s - p0.x) / (p1.x - p0.x), 0.0, 1.0) : 0.0;
-    return vec4(mix(c0, c1, f), mix(p0.y, p1.y, f));
-}
-
-vec4 tf_point(int k) {
-    return vec4(texelFetch(u_tf_points, ivec2(k, 1), 0).rgb, texelFetch(u_tf_points, ivec2(k, 0), 0).y);
-}
 
 // The bracket of tetvr.optics.mean_neg_log: mean of -ln x over [x0, x0 (1 + d)] is
 // -ln x0 - bracket(d); by its series where float32 would cancel (to d^7: < 2e-10 for |d| < 0.1).

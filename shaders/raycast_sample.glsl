@@ -1,4 +1,4 @@
-// raycast_sample.glsl -- reading the volume and the 1D transfer function.
+// raycast_sample.glsl -- reading the volume and the transfer function.
 //
 // Volume: sampler3D, width x height x depth = nx x ny x nz, one channel, linear filter,
 // clamped to the edge. Voxel (i, j, k) sits at texel centre ((i, j, k) + 0.5) / n, so a
@@ -6,14 +6,16 @@
 // interpolation, clamped to the box [0, n-1] like the CPU reference; INTERPOLATION_CUBIC 1
 // reconstructs with the cubic B-spline instead. The texture holds
 // the raw values (8/16-bit normalized or float); scalar = texel * u_value_scale.
-// Transfer function: sampler2D of u_tf_size x 1 RGBA = (colour, opacity) at
-// u_tf_size evenly spaced scalars over u_scalar_range (declared by lookup.glsl).
+// Transfer function: its control points (the union of the colour and opacity points,
+// ascending), one texel each in u_tf_points: row 0 (scalar, opacity, 0, 0), row 1
+// (r, g, b, 0); both maps are linear between two points and constant beyond the ends,
+// so tf_point_at evaluates it exactly, as TransferFunction.evaluate does.
 
 uniform sampler3D u_volume;
 uniform vec3 u_inv_dims;       // 1 / (nx, ny, nz)
 uniform float u_value_scale;
-uniform sampler2D u_tf;
-uniform float u_tf_size;
+uniform sampler2D u_tf_points;
+uniform int u_tf_count;
 
 float texel_at(vec3 p_idx) {
     return texture(u_volume, (p_idx + 0.5) * u_inv_dims).r;
@@ -49,15 +51,35 @@ float scalar_at(vec3 p_idx) {
 }
 #endif
 
+// The transfer function at scalar s: (r, g, b, a), and in *interval the number of
+// control points <= s (0 .. u_tf_count), found by bisection.
+vec4 tf_point_at(float s, out int interval) {
+    int lo = 0, hi = u_tf_count;  // the answer is in [lo, hi]
+    while (lo < hi) {
+        int mid = (lo + hi) >> 1;
+        if (texelFetch(u_tf_points, ivec2(mid, 0), 0).x <= s) lo = mid + 1; else hi = mid;
+    }
+    interval = lo;
+    int i0 = max(lo - 1, 0), i1 = min(lo, u_tf_count - 1);
+    vec4 p0 = texelFetch(u_tf_points, ivec2(i0, 0), 0), p1 = texelFetch(u_tf_points, ivec2(i1, 0), 0);
+    vec3 c0 = texelFetch(u_tf_points, ivec2(i0, 1), 0).rgb, c1 = texelFetch(u_tf_points, ivec2(i1, 1), 0).rgb;
+    float f = p1.x > p0.x ? clamp((s - p0.x) / (p1.x - p0.x), 0.0, 1.0) : 0.0;
+    return vec4(mix(c0, c1, f), mix(p0.y, p1.y, f));
+}
+
+vec4 tf_point(int k) {
+    return vec4(texelFetch(u_tf_points, ivec2(k, 1), 0).rgb, texelFetch(u_tf_points, ivec2(k, 0), 0).y);
+}
+
 // Premultiplied (c a, a) of the transfer function at scalar s.
 vec4 classify(float s) {
-    float x = clamp((s - u_scalar_range.x) / (u_scalar_range.y - u_scalar_range.x), 0.0, 1.0);
-    vec4 ca = texture(u_tf, vec2((x * (u_tf_size - 1.0) + 0.5) / u_tf_size, 0.5));
+    int interval;
+    vec4 ca = tf_point_at(s, interval);
     return vec4(ca.rgb * ca.a, ca.a);
 }
 
 // Colour (not premultiplied) of the transfer function at scalar s.
 vec3 color_at(float s) {
-    float x = clamp((s - u_scalar_range.x) / (u_scalar_range.y - u_scalar_range.x), 0.0, 1.0);
-    return texture(u_tf, vec2((x * (u_tf_size - 1.0) + 0.5) / u_tf_size, 0.5)).rgb;
+    int interval;
+    return tf_point_at(s, interval).rgb;
 }

@@ -133,7 +133,8 @@ class RaycastSettings:
         ``"auto"`` (default): 256 or 512 as the transfer function and the data need
         (:func:`tetvr.raycast_size.auto_bins`); the nodes are aligned on the transfer
         function's control points where that pays.
-    tf_samples : samples of the 1D transfer-function texture used by mip/xray/isosurface.
+    tf_samples : not used any more (every mode evaluates the transfer function exactly at
+        its control points); kept so that saved settings load.
 
     Examples
     --------

@@ -9,7 +9,8 @@ control points (``integration="exact"``: ``raycast_exact.glsl`` cuts each piece 
 and integrates in closed form) or the pre-integration table
 (:func:`tetvr.preintegrate.table_for` with aligned nodes, whose top thickness slice is the
 step; refused before it is built when the GL or the memory cannot hold it); "auto" picks
-(:mod:`tetvr.raycast_size`), and a 1D transfer-function texture for the other modes. Per
+(:mod:`tetvr.raycast_size`); every mode reads the transfer function's control points, so
+a maximum or mean is classified exactly. Per
 frame: the optional per-pixel ray limits go to a texture, one full-screen triangle runs
 ``raycast.frag``, and the RGBA32F target is read back.
 
@@ -46,7 +47,7 @@ class _Mode:
     """How a mode is drawn: its shader defines and what it reads."""
 
     defines: tuple[tuple[str, int], ...]
-    integrates: bool  # emission-absorption: a table or the control points (else the 1D transfer function)
+    integrates: bool  # emission-absorption along the ray (else one classification per pixel)
 
 
 #: Rendering mode -> shader variant (see :class:`~tetvr.raycast_reference.RaycastSettings`).
@@ -166,8 +167,6 @@ class Raycaster(GLOwner):
         self._value_scale = 1.0
         self._table: PreintegrationTable | None = None
         self._table_tex: Any = None
-        self._tf_key: tuple[Any, ...] | None = None
-        self._tf_tex: Any = None
         self._tf_points_tex: Any = None
         self._tf_points_key: TransferFunction | None = None
         self._limits_tex: Any = None
@@ -183,7 +182,7 @@ class Raycaster(GLOwner):
     def _forget(self) -> None:
         self._programs.clear()
         self._vaos.clear()
-        self._volume_tex = self._table_tex = self._tf_tex = self._limits_tex = self._tf_points_tex = None
+        self._volume_tex = self._table_tex = self._limits_tex = self._tf_points_tex = None
         self._tf_points_key = None
         self._no_limits_tex = self._fbo = self._fbo_tex = None
         self._volume = self._gpu_volume = None
@@ -191,7 +190,7 @@ class Raycaster(GLOwner):
 
     def _gl_objects(self) -> list[Any]:
         objs = [*self._vaos.values(), *self._programs.values()]
-        objs += [o for o in (self._volume_tex, self._table_tex, self._tf_tex, self._tf_points_tex, self._limits_tex,
+        objs += [o for o in (self._volume_tex, self._table_tex, self._tf_points_tex, self._limits_tex,
                              self._no_limits_tex, self._fbo, self._fbo_tex) if o is not None]
         return objs
 
@@ -286,25 +285,8 @@ class Raycaster(GLOwner):
         self._table_tex = table_texture(self.ctx, table)
         self._table = table
 
-    def _use_tf(self, tf: TransferFunction, scalar_range: tuple[float, float], n: int) -> None:
-        key = (tf, scalar_range, n)
-        if key == self._tf_key:
-            return
-        import moderngl
-
-        if self._tf_tex is not None:
-            self._tf_tex.release()
-        x = np.linspace(scalar_range[0], scalar_range[1], n)
-        rgb, a = tf.evaluate(x)
-        data = np.concatenate([rgb, a[:, None]], axis=1).astype(np.float32)
-        tex = self.ctx.texture((n, 1), 4, data.tobytes(), dtype="f4")
-        tex.repeat_x = tex.repeat_y = False
-        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self._tf_tex = tex
-        self._tf_key = key
-
     def _use_tf_points(self, tf: TransferFunction) -> None:
-        """The transfer function's control points for raycast_exact.glsl: row 0 (scalar,
+        """The transfer function's control points (raycast_sample.glsl): row 0 (scalar,
         opacity), row 1 the colour, one texel per point of the union of both maps."""
         if tf == self._tf_points_key:
             return
@@ -400,21 +382,19 @@ class Raycaster(GLOwner):
         mode = MODES[s.mode]
         # Ranges come from the original volume: downsampling only narrows them. A table
         # may span more (its nodes aligned on the transfer function's control points):
-        # the 1D transfer function then spans the same range, since both read u_scalar_range.
+        # its own range is what lookup.glsl reads then.
         scalar_range = table_scalar_range(volume.scalar_range, tf)
         table_uniforms: dict[str, Any] = {}
         integration = s.integration_for(volume, tf) if mode.integrates else "table"
         uses_table = mode.integrates and integration == "table"
         if mode.integrates and integration == "exact":
-            self._use_tf_points(tf)
-            table_uniforms = dict(u_tf_points=4, u_tf_count=self._tf_points_tex.width,
-                                  u_inv_unit_distance=min(1.0 / check_unit_distance(tf.unit_distance), 1e30))
+            table_uniforms = dict(u_inv_unit_distance=min(1.0 / check_unit_distance(tf.unit_distance), 1e30))
         if uses_table:
             table = self.table(volume, tf, s)
             self._use_table(table)
             table_uniforms = table.gl_uniforms()
             scalar_range = table.scalar_range
-        self._use_tf(tf, scalar_range, s.tf_samples)
+        self._use_tf_points(tf)
         clock.lap("table")
 
         step = s.step_for(volume, tf)
@@ -445,7 +425,8 @@ class Raycaster(GLOwner):
             u_iso=s.iso_for(volume), u_iso_opacity=s.iso_opacity, u_shading=s.shading,
             u_gradient_to_local=a_inv.T,
             u_inv_dims=tuple(1.0 / n for n in gpu.dims), u_value_scale=self._value_scale,
-            u_tf_size=float(s.tf_samples), u_scalar_range=scalar_range, u_volume=1, u_tf=2, u_limits=3)
+            u_scalar_range=scalar_range, u_volume=1, u_tf_points=2, u_tf_count=self._tf_points_tex.width,
+            u_limits=3)
         uniforms.update(table_uniforms)  # its u_scalar_range is scalar_range
         set_uniforms(prog, **uniforms)
         self._use_target((width, height))
@@ -455,10 +436,8 @@ class Raycaster(GLOwner):
 
         if uses_table:
             self._table_tex.use(0)
-        if mode.integrates and integration == "exact":
-            self._tf_points_tex.use(4)
         self._volume_tex.use(1)
-        self._tf_tex.use(2)
+        self._tf_points_tex.use(2)
         (self._limits_tex if use_limits else self._no_limits_tex).use(3)
         self.ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         vao = self._vaos.get(id(prog))
