@@ -6,7 +6,9 @@
 // filtering (TABLE_CUBIC 1: Catmull-Rom across slices instead). TABLE_NORMALIZED 1: RGB = colour per unit alpha, A = mean extinction, so
 // alpha = 1 - exp(-d A) is exact in d; 0: premultiplied RGBA (Kraus et al. 2004).
 // TABLE_WARP 1: the scalar nodes are uneven (tetvr.tablewarp): table_st gives x, the cells
-// from the first node, and u_warp (u_warp_cells x 1, RGBA32F, no filtering) the node index.
+// from the first node, and u_warp (u_warp_cells x 2, RGBA32F, no filtering) the node index
+// (row 0) and, for TABLE_NORMALIZED, the mean extinction from the optical depth per cell
+// (row 1) instead of the table's A, which cannot follow -ln(1 - a) near opacity 1.
 // Returns premultiplied RGBA.
 
 // The per-fragment arithmetic is reduced to multiply-adds by constants that
@@ -32,6 +34,17 @@ vec2 warp_st(vec2 x) {
     vec2 index = vec2(a.y, b.y) + (x - vec2(a.x, b.x)) * mix(vec2(a.w, b.w), vec2(a.z, b.z), lessThan(x, vec2(a.x, b.x)));
     return (clamp(index, 0.0, u_table_size.x - 1.0) + 0.5) / u_table_size.x;
 }
+
+// Mean extinction from x.x to x.y: the difference of the optical depth P (linear in each
+// cell; P_hi + P_lo, so that nearby cells' difference keeps float32's precision) over x.
+float warp_extinction(vec2 x) {
+    ivec2 c = clamp(ivec2(floor(x)), 0, u_warp_cells - 1);
+    vec4 a = texelFetch(u_warp, ivec2(c.x, 1), 0);
+    vec4 b = texelFetch(u_warp, ivec2(c.y, 1), 0);
+    float dx = x.y - x.x;
+    float dp = (b.x - a.x) + (b.y - a.y) + (x.y - float(c.y)) * b.z - (x.x - float(c.x)) * a.z;
+    return abs(dx) > 1.0e-4 ? dp / dx : a.z;
+}
 #endif
 
 // Texture coordinates of a (front, back) scalar pair (with TABLE_WARP: cells, see warp_st): node i sits at texel centre
@@ -46,7 +59,8 @@ vec2 table_st(vec2 s) {
 // The segment with texture coordinates st (table_st) and world length d.
 vec4 lookup_table(vec2 st, float d) {
 #if defined(TABLE_WARP) && TABLE_WARP
-    st = warp_st(st);
+    vec2 cells = st;
+    st = warp_st(cells);
 #endif
     // Slice 0 is zero thickness, slice k >= 1 is d_min * base^(k - 1), linear below d_min;
     // z is the texture coordinate of the fractional slice, (slice + 0.5) / (K + 1). Beyond
@@ -73,7 +87,11 @@ vec4 lookup_table(vec2 st, float d) {
 #endif
 #if TABLE_NORMALIZED
     // Linear filtering stays within the nodes' colours, which the table keeps in [0, 1].
+#if defined(TABLE_WARP) && TABLE_WARP
+    float alpha = 1.0 - exp(-d * warp_extinction(cells));
+#else
     float alpha = 1.0 - exp2(-d * t.a * u_optical_scale);
+#endif
     return vec4(t.rgb * alpha, alpha);
 #else
     return vec4(min(t.rgb, vec3(t.a)), min(t.a, 1.0));

@@ -50,7 +50,7 @@ from numpy.typing import NDArray
 
 from .image import check_memory
 from .optics import MAX_OPACITY, OPTICS, mean_neg_log
-from .tablewarp import WARP_CELLS, warp_cells, warped_nodes
+from .tablewarp import WARP_CELLS, extinction_cells, warp_cells, warp_extinction, warped_nodes
 from .transfer import TransferFunction
 
 __all__ = ["PreintegrationTable", "build_table", "table_for", "table_scalar_range", "aligned_scalar_range",
@@ -145,6 +145,9 @@ class PreintegrationTable:
         (1 for float32; max extinction for uint8, whose A is stored divided by it).
     nodes : (N,) scalars of the nodes of a warped table (:mod:`tetvr.tablewarp`), or
         None where they are evenly spaced over ``scalar_range``.
+    extinction : a warped table's optical depth per scalar cell
+        (:func:`tetvr.tablewarp.extinction_cells`): a "normalized" warped table takes its
+        segments' mean extinction from it rather than from the interpolated A.
     """
 
     data: NDArray[np.generic]
@@ -154,6 +157,7 @@ class PreintegrationTable:
     encoding: str
     alpha_scale: float = 1.0
     nodes: NDArray[np.float64] | None = None
+    extinction: NDArray[np.float32] | None = None
 
     @property
     def n_bins(self) -> int:
@@ -175,8 +179,17 @@ class PreintegrationTable:
         return np.clip((s - lo) / (hi - lo), 0, 1) * (self.n_bins - 1)
 
     def warp_texels(self) -> NDArray[np.float32] | None:
-        """The warp texture of a warped table (:func:`tetvr.tablewarp.warp_cells`), else None."""
-        return None if self.nodes is None else warp_cells(self.nodes)
+        """The warp texture of a warped table, else None: ``(2, cells, 4)``, row 0 the node
+        index (:func:`tetvr.tablewarp.warp_cells`), row 1 the optical depth
+        (:func:`tetvr.tablewarp.extinction_cells`)."""
+        if self.nodes is None or self.extinction is None:
+            return None
+        return np.stack([warp_cells(self.nodes), self.extinction])
+
+    def cell_coordinate(self, scalars: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Scalars in cells of a warped table's warp texture from its first node (as table_st)."""
+        lo, hi = self.scalar_range
+        return (np.asarray(scalars, dtype=np.float64) - lo) * (WARP_CELLS / (hi - lo))
 
     @property
     def n_slices(self) -> int:
@@ -242,7 +255,10 @@ class PreintegrationTable:
                     out += (wk_ * wj_ * wi_)[..., None] * data[np.minimum(k0 + dk, self.n_slices), j0 + dj, i0 + di]
         d = np.asarray(thickness, dtype=np.float64)
         if self.encoding == "normalized":
-            alpha = -np.expm1(-d * out[..., 3] * self.alpha_scale)
+            tau = out[..., 3] * self.alpha_scale
+            if self.extinction is not None:
+                tau = warp_extinction(self.extinction, self.cell_coordinate(sf), self.cell_coordinate(sb))
+            alpha = -np.expm1(-d * tau)
             return np.concatenate([out[..., :3] * alpha[..., None], alpha[..., None]], axis=-1)
         return out
 
@@ -430,6 +446,8 @@ def build_table(
         raise ValueError(f"dtype must be 'float32' or 'uint8', got {dtype!r}")
     check_table_size(n_bins, n_slices, log_base, warp=warp)
     u = check_unit_distance(tf.unit_distance, "the transfer function's unit_distance")
+    if warp and optics == "vtk":
+        raise ValueError("optics='vtk' (the mean of a segment's end extinctions) has no warped table; use warp=False")
     warped = warped_nodes(tf, (lo, hi), n_bins) if warp else None
     nodes = warped if warped is not None else np.linspace(lo, hi, n_bins)
     n_bins = nodes.size  # a warped table may hold a few more (control points)
@@ -502,10 +520,14 @@ def build_table(
         data = table.astype(np.float32)
     data.setflags(write=False)
     thicknesses = np.concatenate([[0.0], thick])
+    optical = None
     if warped is not None:
         warped.setflags(write=False)
+        optical = extinction_cells(tf, (lo, hi), optics=optics)
+        optical.setflags(write=False)
     return PreintegrationTable(data=data, scalar_range=(lo, hi), thicknesses=thicknesses,
-                               log_base=float(log_base), encoding=encoding, alpha_scale=alpha_scale, nodes=warped)
+                               log_base=float(log_base), encoding=encoding, alpha_scale=alpha_scale, nodes=warped,
+                               extinction=optical)
 
 
 # table_for's cache (called with keywords, so every call shares one key layout).

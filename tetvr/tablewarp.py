@@ -28,9 +28,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from .optics import MAX_OPACITY, mean_neg_log
 from .transfer import TransferFunction
 
-__all__ = ["warped_nodes", "warp_cells", "WARP_CELLS", "WARP_EVEN_SHARE"]
+__all__ = ["warped_nodes", "warp_cells", "extinction_cells", "warp_extinction", "WARP_CELLS", "WARP_EVEN_SHARE"]
 
 #: Cells of the warp texture over the table's scalar range: the narrowest node spacing.
 WARP_CELLS = 8192
@@ -158,3 +159,59 @@ def warp_cells(nodes: NDArray[np.float64], cells: int = WARP_CELLS) -> NDArray[n
     out[c, 2] = slope[k - 1]
     out[c, 3] = slope[k]
     return out.astype(np.float32)
+
+
+def extinction_cells(tf: TransferFunction, scalar_range: tuple[float, float], cells: int = WARP_CELLS, *,
+                     optics: str = "exact") -> NDArray[np.float32]:
+    """The optical depth of a warped table, per cell: ``(cells, 4)`` float32 rows of
+    ``(P_hi, P_lo, mean extinction, 0)``, ``P = P_hi + P_lo`` the extinction summed over the
+    cells before (in extinction x cells), exact for the piecewise-linear opacity
+    (``optics="exact"``: tau = -ln(1 - a) / u; ``"linear"``: a / u).
+
+    A segment's mean extinction is then ``(P(x_b) - P(x_f)) / (x_b - x_f)`` with P linear
+    in each cell: exact where both ends lie on cell boundaries, and off by no more than
+    the extinction varies within one of 8192 cells elsewhere. The table interpolates its
+    mean extinction between nodes instead, which cannot follow -ln(1 - a) where the opacity
+    nears 1 (an opaque spike): there the chord between two nodes misses the logarithm by a
+    constant, however close the nodes (``shaders/lookup.glsl`` reads these rows with
+    ``TABLE_WARP``; the table's own colour is kept). Two floats hold P so that nearby cells'
+    difference keeps float32's relative precision however large P grows over the range.
+
+    >>> tf = TransferFunction(color=((0, 1, 1, 1), (1, 1, 1, 1)), opacity=((0, 0.5), (1, 0.5)))
+    >>> (extinction_cells(tf, (0.0, 1.0), cells=4)[:, [0, 2]].astype(float).round(4) + 0.0).tolist()
+    [[0.0, 0.6931], [0.6931, 0.6931], [1.3863, 0.6931], [2.0794, 0.6931]]
+    """
+    lo, hi = float(scalar_range[0]), float(scalar_range[1])
+    u = tf.unit_distance
+    s = np.union1d(np.linspace(lo, hi, cells + 1), np.clip(tf.breakpoints, lo, hi))
+    _, opacity = tf.evaluate(s)
+    if optics == "exact":
+        clear = 1.0 - np.clip(opacity, 0.0, MAX_OPACITY)
+        mean = mean_neg_log(clear[:-1], clear[1:]) / u
+    else:
+        tau = np.clip(opacity, 0.0, 1.0) / u
+        mean = 0.5 * (tau[:-1] + tau[1:])
+    x = (s - lo) / (hi - lo) * cells
+    cell = np.clip(np.floor(0.5 * (x[1:] + x[:-1])).astype(np.int64), 0, cells - 1)
+    per_cell = np.bincount(cell, weights=mean * np.diff(x), minlength=cells)  # = mean extinction (cells are 1 wide)
+    prefix = np.concatenate([[0.0], np.cumsum(per_cell)[:-1]])
+    p_hi = prefix.astype(np.float32)
+    p_lo = (prefix - p_hi.astype(np.float64)).astype(np.float32)
+    return np.column_stack([p_hi, p_lo, per_cell.astype(np.float32), np.zeros(cells, np.float32)])
+
+
+def warp_extinction(texels: NDArray[np.float32], xf: NDArray[np.float64], xb: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Mean extinction of segments from ``xf`` to ``xb`` (cells from the first node) by
+    :func:`extinction_cells`' rows, as ``shaders/lookup.glsl`` computes it."""
+    rows = texels.astype(np.float64)
+    cells = rows.shape[0]
+
+    def prefix(x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        c = np.clip(np.floor(x), 0, cells - 1).astype(np.int64)
+        return rows[c, 0] + rows[c, 1] + (x - c) * rows[c, 2], rows[c, 2]
+
+    pf, tf_ = prefix(np.asarray(xf, dtype=np.float64))
+    pb, _ = prefix(np.asarray(xb, dtype=np.float64))
+    dx = np.asarray(xb, dtype=np.float64) - xf
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(np.abs(dx) > 1e-4, (pb - pf) / np.where(dx != 0, dx, 1.0), tf_)

@@ -276,8 +276,9 @@ def table_texture(ctx: Any, table: "PreintegrationTable") -> Any:
     warp = table.warp_texels()
     if warp is None:
         return tex
-    # A warped table's node index per scalar cell (lookup.glsl's u_warp), read unfiltered.
-    warp_tex = ctx.texture((warp.shape[0], 1), 4, warp.tobytes(), dtype="f4")
+    # A warped table's node index and optical depth per scalar cell (lookup.glsl's u_warp:
+    # rows 0 and 1), read unfiltered.
+    warp_tex = ctx.texture((warp.shape[1], warp.shape[0]), 4, warp.tobytes(), dtype="f4")
     warp_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
     return WarpedTableTexture(tex, warp_tex)
 
