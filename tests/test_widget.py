@@ -773,3 +773,42 @@ def test_fused_frames_from_the_render_process_equal_tetvr_fuse():
             inproc.close()
     finally:
         model.close()
+
+
+def test_a_viewer_nobody_sees_frees_its_renderer_until_the_next_frame(tmp_path, monkeypatch):
+    import tetvr.gl.renderer
+
+    made = []
+
+    class FakeRenderer(RecordingRenderer):
+        def __init__(self, settings=None):
+            super().__init__()
+            self.settings, self.released = settings, False
+            made.append(self)
+
+        def release(self):
+            self.released = True
+
+    monkeypatch.setattr(tetvr.gl.renderer, "Renderer", FakeRenderer)
+    pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
+    from tetvr.widget import Viewer
+
+    v = Viewer(_scene(tmp_path), renderer=None, idle_release_s=0.05)
+    try:
+        assert v.loop.wait_idle(10) and len(made) == 1
+        v.canvas._has_visible_views = True
+        v.canvas._has_visible_views = False  # the cell's output was cleared (or scrolled away)
+        deadline = time.monotonic() + 5
+        while not made[0].released and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert made[0].released and v.model._renderer is None
+        v.canvas._has_visible_views = True
+        v._image_event({"type": "wheel", "dx": 0, "dy": -100, "x": 5, "y": 5})
+        assert v.loop.wait_idle(10) and len(made) == 2 and made[1].calls  # made again for the next frame
+        v.canvas._has_visible_views = False
+        v.canvas._has_visible_views = True  # back in view before the delay: kept
+        time.sleep(0.2)
+        assert not made[1].released
+    finally:
+        v.close()
+    assert made[1].released

@@ -154,6 +154,10 @@ class Viewer:
         which would stop the kernel's input and output for the length of each frame);
         ``None``: one in the kernel's process. Either is driven by the render loop only.
 
+    idle_release_s : after this long with no view of the picture on any page (its output
+        cleared by re-running the cell, or scrolled away), the renderer and its GL memory
+        are freed; the next frame makes them again.
+
     :meth:`close` stops the loop and frees the GL memory; closing the widget calls it.
 
     Examples
@@ -165,7 +169,7 @@ class Viewer:
     def __init__(self, scene: Scene | TetMesh | str | os.PathLike[str], *, size: tuple[int, int] | None = None,
                  settle_s: float = 0.25, preview_budget_s: float = 0.06, step_degrees: float = 15.0,
                  volume: Any = None, volume_tf: Any = None, fusion: str = "interleave",
-                 renderer: Any = "process") -> None:
+                 renderer: Any = "process", idle_release_s: float = 60.0) -> None:
         from .widget import scene_of
 
         self.model = ViewerModel(scene_of(scene, size=size), renderer=renderer, settle_s=settle_s)
@@ -183,7 +187,10 @@ class Viewer:
             self._kernel_loop: asyncio.AbstractEventLoop | None = asyncio.get_running_loop()
         except RuntimeError:  # plain Python, tests: deliver on the calling thread
             self._kernel_loop = None
+        self.idle_release_s = float(idle_release_s)
+        self._hidden_timer: threading.Timer | None = None
         self._build()
+        self.canvas.observe(self._on_visibility, names="_has_visible_views")
         self.loop = RenderLoop(self.model, self._deliver, settle_s=settle_s, budget_s=preview_budget_s,
                                on_busy=self._busy)
         self.loop.update(final=True)
@@ -462,11 +469,26 @@ class Viewer:
         self.hist.request_draw()
 
     # ---- lifetime ----
+    def _on_visibility(self, change: dict[str, Any]) -> None:
+        if self._hidden_timer is not None:
+            self._hidden_timer.cancel()
+            self._hidden_timer = None
+        if not change["new"] and not self._closed:
+            self._hidden_timer = threading.Timer(self.idle_release_s, self._release_if_hidden)
+            self._hidden_timer.daemon = True
+            self._hidden_timer.start()
+
+    def _release_if_hidden(self) -> None:
+        if not self._closed and not self.canvas._has_visible_views:
+            self.loop.suspend()
+
     def close(self) -> None:
         """Stop the render loop, free the renderer's GL memory and close the widgets."""
         if self._closed:
             return
         self._closed = True
+        if self._hidden_timer is not None:
+            self._hidden_timer.cancel()
         self.loop.close()
 
         def close_all(widget: Any) -> None:

@@ -152,6 +152,7 @@ class RenderLoop:
         self._last_change = -math.inf
         self._first_unanswered: float | None = None  # clock time of the oldest input not yet drawn
         self._closed = False
+        self._suspend = False
         self._busy = False
         self.last_frame: Frame | None = None
         self.last_error: str | None = None
@@ -189,6 +190,13 @@ class RenderLoop:
         than ``settle_s`` later. Nothing is drawn if the full frame is already current."""
         with self._cond:
             self._last_change = -math.inf
+            self._cond.notify_all()
+
+    def suspend(self) -> None:
+        """Free the renderer (its GL memory, its process) on the loop thread, between
+        frames; the next frame makes a new one. For a viewer nobody sees."""
+        with self._cond:
+            self._suspend = True
             self._cond.notify_all()
 
     def redraw(self) -> None:
@@ -245,6 +253,9 @@ class RenderLoop:
             while True:
                 if self._closed:
                     return None
+                if self._suspend:
+                    self._suspend = False
+                    return ()
                 now = self.clock()
                 quiet = now - self._last_change
                 if self._revision != self._drawn and quiet < self.settle_s:
@@ -286,6 +297,12 @@ class RenderLoop:
             job = self._next()
             if job is None:
                 return
+            if job == ():
+                try:
+                    self.model.close()  # made again by the next frame
+                except Exception:  # noqa: BLE001 - kept, and shown with the next frame's status
+                    self.last_error = traceback.format_exc()
+                continue
             request, (mesh, camera, tf, small_table, fusion), revision, wanted_at = job
             t0 = time.perf_counter()
             try:
