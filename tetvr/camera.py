@@ -393,7 +393,7 @@ def reset_clipping_range(camera: Camera, bounds: Any) -> Camera:
     return dataclasses.replace(camera, clipping_range=(near, far))
 
 
-def check_clipping_range(camera: Camera, points: Any, *, stacklevel: int = 2) -> bool:
+def check_clipping_range(camera: Camera, points: Any) -> bool:
     """Warn (``UserWarning``) when the camera's clipping range leaves none of ``points``
     between its near and far planes, so the picture would be blank; returns whether it
     does. :func:`reset_clipping_range` gives a range from the data."""

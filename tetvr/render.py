@@ -141,7 +141,7 @@ def render(
     if camera is None:
         camera = Camera.fit(mesh)
     else:
-        check_clipping_range(camera, mesh.points, stacklevel=2)  # a blank picture is said, not silent
+        check_clipping_range(camera, mesh.points)  # a blank picture is said, not silent
     if tf is None:
         parity = settings is not None and settings.optics == "vtk"
         # VTK parity: ParaView's default unit distance (diagonal / cube root of the cells).
