@@ -184,6 +184,7 @@ def read_dicom(path: str | os.PathLike[str], *, space: str = "LPS") -> Volume:
     headers = [_itk_header(sitk, n, f"DICOM file {n!r}", io="GDCMImageIO") for n in names]
     for n, h in zip(names, headers):
         _dicom_rescale(h, n)
+        _dicom_check_pixel_bytes(h, n)
     first = headers[0]
     dims = tuple(int(v) for v in first.GetSize()[:2]) + (len(names),)
     _check_declared(dims, _itk_dtype(sitk, first.GetPixelID()) if first.GetNumberOfComponents() == 1
@@ -208,6 +209,44 @@ def read_dicom(path: str | os.PathLike[str], *, space: str = "LPS") -> Volume:
                              scalar_name=vol.scalar_name, space=vol.space)
                 break
     return _to_space(vol, space)
+
+
+#: Transfer syntaxes whose pixel data are stored as they are (implicit/explicit VR, little or
+#: big endian), and the deflated one (deflate holds at most 1032 times its size).
+_DICOM_PLAIN = {"1.2.840.10008.1.2", "1.2.840.10008.1.2.1", "1.2.840.10008.1.2.2"}
+_DICOM_DEFLATED = "1.2.840.10008.1.2.1.99"
+
+
+def _dicom_transfer_syntax(path: str) -> str:
+    """The file's Transfer Syntax UID (0002,0010) from its meta header, or "" if it has none
+    (a bare data set is implicit VR little endian: stored as it is)."""
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    at = head.find(b"\x02\x00\x10\x00UI")
+    if at < 0 or at + 8 > len(head):
+        return ""
+    n = int.from_bytes(head[at + 6:at + 8], "little")
+    return head[at + 8:at + 8 + n].decode("ascii", "replace").strip("\x00 ")
+
+
+def _dicom_check_pixel_bytes(reader: Any, where: str) -> None:
+    """A slice that declares more pixel bytes than its file can hold is refused before ITK
+    reads it: GDCM returns such an image (rows x columns of whatever memory held) instead
+    of an error, and copying it out allocates what the header claims."""
+    size = reader.GetSize()
+    bits = _dicom_numbers(reader, "0028|0100") or [16.0]
+    samples = _dicom_numbers(reader, "0028|0002") or [1.0]
+    dims = (int(size[0]), int(size[1]), int(size[2]) if len(size) > 2 else 1)
+    dtype = np.dtype(f"u{max(1, int(bits[0]) // 8)}") if int(bits[0]) in (8, 16, 32, 64) else np.dtype("u2")
+    syntax = _dicom_transfer_syntax(where)
+    nbytes = os.stat(where).st_size
+    what = f"DICOM file {os.path.basename(where)!r}"
+    if int(samples[0]) != 1:
+        dims = (dims[0] * int(samples[0]), dims[1], dims[2])
+    if syntax in _DICOM_PLAIN or syntax == "":
+        _check_declared(dims, dtype, what, holds=nbytes)
+    elif syntax == _DICOM_DEFLATED:
+        _check_declared(dims, dtype, what, how=" (deflated)", holds=_DEFLATE_MAX_RATIO * nbytes)
 
 
 def _dicom_numbers(reader: Any, tag: str) -> list[float] | None:

@@ -359,6 +359,17 @@ def test_dicom_rescale_beyond_int64_does_not_wrap(tmp_path, slope):
     assert vol.data.min() >= -1024
 
 
+def test_dicom_declaring_more_pixels_than_the_file_holds(tmp_path):
+    pydicom = pytest.importorskip("pydicom")
+    path = _dicom_slice(tmp_path, np.arange(6).reshape(2, 3), "1")
+    ds = pydicom.dcmread(path)
+    ds.Rows = ds.Columns = 30000  # 1.7 GiB declared over 12 bytes of pixel data
+    ds.save_as(path)
+    with deadline(DEADLINE_S, "read_dicom"), pytest.raises(
+            ValueError, match=r"slice\.dcm.*declares 30000 x 30000 x 1 voxels of uint16 .*can hold at most"):
+        read_dicom(path)
+
+
 # ---------------------------------------------------------------------------------
 # 8. NIfTI, VTI and legacy structured points declaring more than memory or the file
 # ---------------------------------------------------------------------------------
