@@ -6,9 +6,10 @@
 // filtering (TABLE_CUBIC 1: Catmull-Rom across slices instead). TABLE_NORMALIZED 1: RGB = colour per unit alpha, A = mean extinction, so
 // alpha = 1 - exp(-d A) is exact in d; 0: premultiplied RGBA (Kraus et al. 2004).
 // TABLE_WARP 1: the scalar nodes are uneven (tetvr.tablewarp): table_st gives x, the cells
-// from the first node, and u_warp (u_warp_cells x 2, RGBA32F, no filtering) the node index
+// from the first node, and u_warp (u_warp_cells x 3, RGBA32F, no filtering) the node index
 // (row 0) and, for TABLE_NORMALIZED, the mean extinction from the optical depth per cell
-// (row 1) instead of the table's A, which cannot follow -ln(1 - a) near opacity 1.
+// (row 1) or the opacity per node (row 2) instead of the table's A, which cannot follow
+// -ln(1 - a) near opacity 1.
 // Returns premultiplied RGBA.
 
 // The per-fragment arithmetic is reduced to multiply-adds by constants that
@@ -35,15 +36,26 @@ vec2 warp_st(vec2 x) {
     return (clamp(index, 0.0, u_table_size.x - 1.0) + 0.5) / u_table_size.x;
 }
 
-// Mean extinction from x.x to x.y: the difference of the optical depth P (linear in each
-// cell; P_hi + P_lo, so that nearby cells' difference keeps float32's precision) over x.
-float warp_extinction(vec2 x) {
-    ivec2 c = clamp(ivec2(floor(x)), 0, u_warp_cells - 1);
-    vec4 a = texelFetch(u_warp, ivec2(c.x, 1), 0);
-    vec4 b = texelFetch(u_warp, ivec2(c.y, 1), 0);
+// Mean extinction from x.x to x.y (node coordinates st, warp_st): the difference of the
+// optical depth P (linear in each cell; P_hi + P_lo, so that nearby cells' difference keeps
+// float32's precision) over x; within a cell, where that quotient would divide the rounding
+// of x (~5e-4 cells at 8192) by a tiny dx, the extinction at the middle, exactly, from the
+// opacity at the nodes (row 2: opacity, 1 / unit distance, 1 for tau = a / u).
+float warp_extinction(vec2 x, vec2 st) {
     float dx = x.y - x.x;
-    float dp = (b.x - a.x) + (b.y - a.y) + (x.y - float(c.y)) * b.z - (x.x - float(c.x)) * a.z;
-    return abs(dx) > 1.0e-4 ? dp / dx : a.z;
+    if (abs(dx) >= 1.0) {
+        ivec2 c = clamp(ivec2(floor(x)), 0, u_warp_cells - 1);
+        vec4 a = texelFetch(u_warp, ivec2(c.x, 1), 0);
+        vec4 b = texelFetch(u_warp, ivec2(c.y, 1), 0);
+        float dp = (b.x - a.x) + (b.y - a.y) + (x.y - float(c.y)) * b.z - (x.x - float(c.x)) * a.z;
+        return dp / dx;
+    }
+    float index = 0.5 * (st.x + st.y) * u_table_size.x - 0.5;
+    int i = clamp(int(floor(index)), 0, int(u_table_size.x) - 2);
+    vec4 n0 = texelFetch(u_warp, ivec2(i, 2), 0);
+    vec4 n1 = texelFetch(u_warp, ivec2(i + 1, 2), 0);
+    float opacity = mix(n0.x, n1.x, clamp(index - float(i), 0.0, 1.0));
+    return n0.z > 0.5 ? opacity * n0.y : -log(1.0 - opacity) * n0.y;
 }
 #endif
 
@@ -88,7 +100,7 @@ vec4 lookup_table(vec2 st, float d) {
 #if TABLE_NORMALIZED
     // Linear filtering stays within the nodes' colours, which the table keeps in [0, 1].
 #if defined(TABLE_WARP) && TABLE_WARP
-    float alpha = 1.0 - exp(-d * warp_extinction(cells));
+    float alpha = 1.0 - exp(-d * warp_extinction(cells, st));
 #else
     float alpha = 1.0 - exp2(-d * t.a * u_optical_scale);
 #endif

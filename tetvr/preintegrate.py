@@ -50,7 +50,7 @@ from numpy.typing import NDArray
 
 from .image import check_memory
 from .optics import MAX_OPACITY, OPTICS, mean_neg_log
-from .tablewarp import WARP_CELLS, extinction_cells, warp_cells, warp_extinction, warped_nodes
+from .tablewarp import WARP_CELLS, extinction_cells, node_opacity_cells, warp_cells, warp_extinction, warped_nodes
 from .transfer import TransferFunction
 
 __all__ = ["PreintegrationTable", "build_table", "table_for", "table_scalar_range", "aligned_scalar_range",
@@ -145,9 +145,10 @@ class PreintegrationTable:
         (1 for float32; max extinction for uint8, whose A is stored divided by it).
     nodes : (N,) scalars of the nodes of a warped table (:mod:`tetvr.tablewarp`), or
         None where they are evenly spaced over ``scalar_range``.
-    extinction : a warped table's optical depth per scalar cell
-        (:func:`tetvr.tablewarp.extinction_cells`): a "normalized" warped table takes its
-        segments' mean extinction from it rather than from the interpolated A.
+    extinction : (2, cells, 4) float32: a warped table's optical depth per scalar cell
+        (:func:`tetvr.tablewarp.extinction_cells`) and opacity per node
+        (:func:`tetvr.tablewarp.node_opacity_cells`): a "normalized" warped table takes its
+        segments' mean extinction from them rather than from the interpolated A.
     """
 
     data: NDArray[np.generic]
@@ -179,12 +180,11 @@ class PreintegrationTable:
         return np.clip((s - lo) / (hi - lo), 0, 1) * (self.n_bins - 1)
 
     def warp_texels(self) -> NDArray[np.float32] | None:
-        """The warp texture of a warped table, else None: ``(2, cells, 4)``, row 0 the node
-        index (:func:`tetvr.tablewarp.warp_cells`), row 1 the optical depth
-        (:func:`tetvr.tablewarp.extinction_cells`)."""
+        """The warp texture of a warped table, else None: ``(3, cells, 4)``, row 0 the node
+        index (:func:`tetvr.tablewarp.warp_cells`), rows 1 and 2 :attr:`extinction`."""
         if self.nodes is None or self.extinction is None:
             return None
-        return np.stack([warp_cells(self.nodes), self.extinction])
+        return np.concatenate([warp_cells(self.nodes)[None], self.extinction])
 
     def cell_coordinate(self, scalars: NDArray[np.float64]) -> NDArray[np.float64]:
         """Scalars in cells of a warped table's warp texture from its first node (as table_st)."""
@@ -257,7 +257,8 @@ class PreintegrationTable:
         if self.encoding == "normalized":
             tau = out[..., 3] * self.alpha_scale
             if self.extinction is not None:
-                tau = warp_extinction(self.extinction, self.cell_coordinate(sf), self.cell_coordinate(sb))
+                tau = warp_extinction(self.extinction[0], self.cell_coordinate(sf), self.cell_coordinate(sb),
+                                      self.extinction[1], fi, fj)
             alpha = -np.expm1(-d * tau)
             return np.concatenate([out[..., :3] * alpha[..., None], alpha[..., None]], axis=-1)
         return out
@@ -523,7 +524,8 @@ def build_table(
     optical = None
     if warped is not None:
         warped.setflags(write=False)
-        optical = extinction_cells(tf, (lo, hi), optics=optics)
+        optical = np.stack([extinction_cells(tf, (lo, hi), optics=optics),
+                            node_opacity_cells(tf, warped, optics=optics)])
         optical.setflags(write=False)
     return PreintegrationTable(data=data, scalar_range=(lo, hi), thicknesses=thicknesses,
                                log_base=float(log_base), encoding=encoding, alpha_scale=alpha_scale, nodes=warped,

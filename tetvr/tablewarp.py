@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from .optics import MAX_OPACITY, mean_neg_log
 from .transfer import TransferFunction
 
-__all__ = ["warped_nodes", "warp_cells", "extinction_cells", "warp_extinction", "WARP_CELLS", "WARP_EVEN_SHARE"]
+__all__ = ["warped_nodes", "warp_cells", "extinction_cells", "node_opacity_cells", "warp_extinction", "WARP_CELLS", "WARP_EVEN_SHARE"]
 
 #: Cells of the warp texture over the table's scalar range: the narrowest node spacing.
 WARP_CELLS = 8192
@@ -200,9 +200,26 @@ def extinction_cells(tf: TransferFunction, scalar_range: tuple[float, float], ce
     return np.column_stack([p_hi, p_lo, per_cell.astype(np.float32), np.zeros(cells, np.float32)])
 
 
-def warp_extinction(texels: NDArray[np.float32], xf: NDArray[np.float64], xb: NDArray[np.float64]) -> NDArray[np.float64]:
+def node_opacity_cells(tf: TransferFunction, nodes: NDArray[np.float64], cells: int = WARP_CELLS, *,
+                       optics: str = "exact") -> NDArray[np.float32]:
+    """Row 2 of a warped table's warp texture: per node (the rest zero) its opacity, clamped
+    as the optics clamp it, ``1 / unit_distance`` and 1 for ``tau = a / u`` (``"linear"``)
+    or 0 for ``tau = -ln(1 - a) / u``: the extinction of a segment within one cell, at its
+    middle, exactly (the opacity is linear between nodes)."""
+    _, opacity = tf.evaluate(nodes)
+    out = np.zeros((cells, 4), np.float32)
+    out[: nodes.size, 0] = np.clip(opacity, 0.0, MAX_OPACITY if optics == "exact" else 1.0)
+    out[: nodes.size, 1] = 1.0 / tf.unit_distance
+    out[: nodes.size, 2] = 0.0 if optics == "exact" else 1.0
+    return out
+
+
+def warp_extinction(texels: NDArray[np.float32], xf: NDArray[np.float64], xb: NDArray[np.float64],
+                    node_opacity: NDArray[np.float32] | None = None, index_f: NDArray[np.float64] | None = None,
+                    index_b: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
     """Mean extinction of segments from ``xf`` to ``xb`` (cells from the first node) by
-    :func:`extinction_cells`' rows, as ``shaders/lookup.glsl`` computes it."""
+    :func:`extinction_cells`' rows, and within a cell by :func:`node_opacity_cells`' at the
+    middle node coordinate, as ``shaders/lookup.glsl`` computes it."""
     rows = texels.astype(np.float64)
     cells = rows.shape[0]
 
@@ -213,5 +230,12 @@ def warp_extinction(texels: NDArray[np.float32], xf: NDArray[np.float64], xb: ND
     pf, tf_ = prefix(np.asarray(xf, dtype=np.float64))
     pb, _ = prefix(np.asarray(xb, dtype=np.float64))
     dx = np.asarray(xb, dtype=np.float64) - xf
+    thin = tf_
+    if node_opacity is not None and index_f is not None and index_b is not None:
+        n = int(np.count_nonzero(node_opacity[:, 1]))
+        mid = 0.5 * (np.asarray(index_f) + np.asarray(index_b))
+        i = np.clip(np.floor(mid).astype(np.int64), 0, n - 2)
+        a = node_opacity[i, 0] + np.clip(mid - i, 0.0, 1.0) * (node_opacity[i + 1, 0].astype(np.float64) - node_opacity[i, 0])
+        thin = (a if node_opacity[0, 2] > 0.5 else -np.log1p(-a)) * float(node_opacity[0, 1])
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(np.abs(dx) > 1e-4, (pb - pf) / np.where(dx != 0, dx, 1.0), tf_)
+        return np.where(np.abs(dx) >= 1.0, (pb - pf) / np.where(dx != 0, dx, 1.0), thin)
