@@ -163,7 +163,7 @@ def bricks(args: argparse.Namespace, n_tets: float) -> dict:
             base = c.run(_peak_rss_mib)
             t = time.perf_counter()
             b = distribute_mesh(mesh, p, c, tree=tree)
-            c.gather(list(b.futures.values()))
+            __import__("distributed").wait(list(b.futures.values()))
             t_send = time.perf_counter() - t
             t = time.perf_counter()
             b.render(views[0], tf, size=size)

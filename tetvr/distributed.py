@@ -540,7 +540,12 @@ def distribute_pieces(pieces: Any, n_bricks: int, client: Any, *, scalars: str |
         labels[i] = "pieces " + ", ".join(os.path.basename(files[k]) for k in pieces_in)
         parts = [client.submit(_piece_part, read[k], box, pure=False) for k in pieces_in]
         futures[i] = client.submit(_assemble_brick, i, labels[i], paths[i], whole, name, *parts, pure=False)
-    client.gather(list(futures.values()))  # made (and any error raised) before the pieces go
+    # Made (and any error raised, naming its piece) before the pieces go; waited for, not
+    # gathered: the bricks stay on the workers.
+    _dask().wait(list(futures.values()))
+    for f in futures.values():
+        if f.status == "error":
+            f.result()
     del read
     chooser = TetMesh.from_arrays(corners.reshape(-1, 3), np.arange(corners.shape[0] * 4).reshape(-1, 4),
                                   np.zeros(corners.shape[0] * 4))
