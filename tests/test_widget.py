@@ -445,6 +445,13 @@ def test_render_loop_draws_the_latest_state_and_drops_stale_ones(tmp_path):
         assert not loop.wait_idle(0.3)
         loop.settle()
         assert loop.wait_idle(10) and frames[-1].final and rec.calls[-1]["camera"] == model.camera
+        # While a button is held, a pause longer than settle_s is not the end of the drag.
+        loop.settle_s, loop.hold_settle_s = 0.05, 30.0
+        loop.hold()
+        loop.update(lambda m: m.control.azimuth(1.0))
+        assert not loop.wait_idle(0.4) and not frames[-1].final
+        loop.settle()
+        assert loop.wait_idle(10) and frames[-1].final
     finally:
         loop.close()
     with pytest.raises(RuntimeError, match="closed"):

@@ -103,6 +103,7 @@ class _EditorPanel:
         x, y = float(event.get("x", 0.0)), float(event.get("y", 0.0))
         picker = self.picker
         if kind == "pointer_down" and y < HIST_SIZE[1]:
+            self.viewer.loop.hold()
             self.viewer._edit(self, lambda: picker.press(x, y))
         elif kind == "pointer_move" and picker.dragging:
             self.viewer._edit(self, lambda: picker.move(x, y))
@@ -153,7 +154,6 @@ class Viewer:
         (:mod:`tetvr.widget_process`: moderngl holds the interpreter lock while it draws,
         which would stop the kernel's input and output for the length of each frame);
         ``None``: one in the kernel's process. Either is driven by the render loop only.
-
     idle_release_s : after this long with no view of the picture on any page (its output
         cleared by re-running the cell, or scrolled away), the renderer and its GL memory
         are freed; the next frame makes them again.
@@ -349,6 +349,7 @@ class Viewer:
         elif kind == "pointer_down":
             pan = event.get("button") == 2 or "Shift" in event.get("modifiers", ())
             self._drag = (float(event["x"]), float(event["y"]), pan)
+            self.loop.hold()
         elif kind == "pointer_move" and self._drag is not None:
             x0, y0, pan = self._drag
             x, y = float(event["x"]), float(event["y"])

@@ -152,6 +152,8 @@ class RenderLoop:
         self._last_change = -math.inf
         self._first_unanswered: float | None = None  # clock time of the oldest input not yet drawn
         self._closed = False
+        self._holding = False  # a button is held (a drag): its end, not a pause, brings the full frame
+        self.hold_settle_s = max(1.0, self.settle_s)
         self._suspend = False
         self._busy = False
         self.last_frame: Frame | None = None
@@ -185,10 +187,19 @@ class RenderLoop:
             self._cond.notify_all()
             return out
 
+    def hold(self) -> None:
+        """A drag has begun (a mouse button went down): pauses in its input are not its
+        end, so the full frame waits ``hold_settle_s`` (1 s) of quiet, or :meth:`settle`.
+        (Under load, browser events arrive with gaps longer than ``settle_s``; a full frame
+        started in such a gap would hold up the previews for its whole length.)"""
+        with self._cond:
+            self._holding = True
+
     def settle(self) -> None:
         """The input has ended (a mouse button came up): draw the full frame now rather
         than ``settle_s`` later. Nothing is drawn if the full frame is already current."""
         with self._cond:
+            self._holding = False
             self._last_change = -math.inf
             self._cond.notify_all()
 
@@ -258,17 +269,18 @@ class RenderLoop:
                     return ()
                 now = self.clock()
                 quiet = now - self._last_change
-                if self._revision != self._drawn and quiet < self.settle_s:
+                settle = self.hold_settle_s if self._holding else self.settle_s
+                if self._revision != self._drawn and quiet < settle:
                     final = False
                     break
-                if self._final != self._revision and quiet >= self.settle_s:
+                if self._final != self._revision and quiet >= settle:
                     final = True
                     break
                 if self._busy:
                     self._busy = False
                     self._notify_busy(False)
                     self._cond.notify_all()
-                timeout = None if self._final == self._revision else max(self.settle_s - quiet, 0.001)
+                timeout = None if self._final == self._revision else max(settle - quiet, 0.001)
                 self._cond.wait(timeout)
             m = self.model
             full = tuple(m.size)
