@@ -135,8 +135,9 @@ void main() {
 #if RAYCAST_MODE == 0
     vec4 acc = vec4(0.0);
 #if INTEGRATION_EXACT
-    int i_prev;
-    vec4 v_prev = tf_point_at(s_prev, i_prev);
+    TFInterval interval = tf_interval(s_prev);
+    vec4 v_prev = tf_in(interval, s_prev);
+    int i_prev = interval.i;
 #endif
 #elif RAYCAST_MODE == 1
     float s_max = s_prev;
@@ -155,8 +156,9 @@ void main() {
         float s_next = scalar_at(p0_idx + off_next * d_idx);
 #if RAYCAST_MODE == 0
 #if INTEGRATION_EXACT
-        int i_next;
-        vec4 v_next = tf_point_at(s_next, i_next);
+        if (!tf_holds(interval, s_next)) interval = tf_interval(s_next);
+        vec4 v_next = tf_in(interval, s_next);
+        int i_next = interval.i;
         vec4 piece = integrate_piece(s_prev, v_prev, i_prev, s_next, v_next, i_next, (off_next - off_prev) * world_per_t);
         v_prev = v_next;
         i_prev = i_next;

@@ -4,7 +4,7 @@
 // form (optical depth) and by 3-point Gauss-Legendre quadrature (colour), as
 // tetvr.optics.integrate_pieces does in float64 (the same exact model, tau = -ln(1 - a) / u).
 //
-// In:  raycast_sample.glsl's transfer function (tf_point_at, tf_point: its control points);
+// In:  raycast_sample.glsl's transfer function (tf_interval, tf_point: its control points);
 //      u_inv_unit_distance: 1 / the transfer function's unit distance.
 // Out: integrate_piece (premultiplied RGBA of a piece seen from its front).
 
@@ -33,57 +33,57 @@ float one_minus_exp(float t) {
     return t < 1e-3 ? t * (1.0 - t * (0.5 - t * (1.0 / 6.0))) : 1.0 - exp(-t);
 }
 
-// One part, colour and opacity linear from (c0, a0) to (c1, a1) over world length len.
+// One part, colour linear from c0 to c1 and transmittance per unit distance 1 - a from
+// x0 to x1, k = its length / unit distance, theta = its optical depth (k mean_neg_log).
 // I = c0 (1 - T(L)) + (c1 - c0) int_0^1 (T(xi) - T(L)) dxi, the colour integral by parts
 // (tetvr.optics.integrate_pieces) written so that no two O(1) terms cancel when the part
 // is faint; with constant opacity the integral is closed form, else 3-point
 // Gauss-Legendre (the part's optical depth is at most SUB_THETA and its 1 - a within
 // 2x: the error is below float32's).
-vec4 integrate_part(vec4 v0, vec4 v1, float len) {
-    float x0 = 1.0 - min(v0.a, MAX_OPACITY), x1 = 1.0 - min(v1.a, MAX_OPACITY);
-    float k = len * u_inv_unit_distance;
-    float nl0 = -log(x0);
+vec4 integrate_part(vec3 c0, vec3 c1, float x0, float x1, float k, float theta) {
+    float a = one_minus_exp(theta);
     float tail;
-    float theta;
     if (x0 == x1) {
-        theta = k * nl0;
-        float a = one_minus_exp(theta);
         // int_0^1 exp(-xi theta) - exp(-theta) = a / theta - (1 - a); its series below 0.01.
         tail = theta < 0.01 ? theta * (0.5 - theta * (1.0 / 3.0 - theta * (1.0 / 8.0 - theta / 30.0)))
                             : a / theta - (1.0 - a);
-        return vec4(v0.rgb * a + (v1.rgb - v0.rgb) * tail, a);
+    } else {
+        const vec3 gx = vec3(0.1127016654, 0.5, 0.8872983346);
+        const vec3 gw = vec3(5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0);
+        float nl0 = -log(x0), d = x1 / x0 - 1.0;
+        tail = 0.0;
+        for (int q = 0; q < 3; ++q) {
+            float before = gx[q] * k * (nl0 - bracket(gx[q] * d));
+            tail += gw[q] * exp(-before) * one_minus_exp(max(theta - before, 0.0));
+        }
     }
-    theta = k * (nl0 - bracket(x1 / x0 - 1.0));
-    const vec3 gx = vec3(0.1127016654, 0.5, 0.8872983346);
-    const vec3 gw = vec3(5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0);
-    tail = 0.0;
-    for (int q = 0; q < 3; ++q) {
-        float before = gx[q] * k * (nl0 - bracket(gx[q] * (x1 / x0 - 1.0)));
-        tail += gw[q] * exp(-before) * one_minus_exp(max(theta - before, 0.0));
-    }
-    float a = one_minus_exp(theta);
-    return vec4(v0.rgb * a + (v1.rgb - v0.rgb) * tail, a);
+    return vec4(c0 * a + (c1 - c0) * tail, a);
 }
 
 // A cut on which colour and opacity are linear: in parts (see SUB_THETA), composited.
 vec4 integrate_cut(vec4 v0, vec4 v1, float len) {
     if (v0.a == 0.0 && v1.a == 0.0) return vec4(0.0);  // transparent: most of a sparse transfer function
     float x0 = 1.0 - min(v0.a, MAX_OPACITY), x1 = 1.0 - min(v1.a, MAX_OPACITY);
-    float theta = len * u_inv_unit_distance * mean_neg_log(x0, x1);
-    float parts = max(ceil(theta / SUB_THETA), ceil(abs(log2(x1 / x0))));
-    int n = int(clamp(parts, 1.0, float(MAX_PARTS)));
-    if (n == 1) return integrate_part(v0, v1, len);
+    float k = len * u_inv_unit_distance;
+    float theta = k * mean_neg_log(x0, x1);
+    float ratio = x1 / x0;
+    if (theta <= SUB_THETA && ratio <= 2.0 && ratio >= 0.5) return integrate_part(v0.rgb, v1.rgb, x0, x1, k, theta);
+    int n = int(clamp(max(ceil(theta / SUB_THETA), ceil(abs(log2(ratio)))), 1.0, float(MAX_PARTS)));
     vec4 acc = vec4(0.0);
-    vec4 va = v0;
+    vec3 ca = v0.rgb;
+    float xa = x0;
     for (int p = 1; p <= n; ++p) {
-        vec4 vb = mix(v0, v1, float(p) / float(n));
-        acc += (1.0 - acc.a) * integrate_part(va, vb, len / float(n));
-        va = vb;
+        float f = float(p) / float(n);
+        vec3 cb = mix(v0.rgb, v1.rgb, f);
+        float xb = mix(x0, x1, f);
+        acc += (1.0 - acc.a) * integrate_part(ca, cb, xa, xb, k / float(n), k / float(n) * mean_neg_log(xa, xb));
+        ca = cb;
+        xa = xb;
     }
     return acc;
 }
 
-// The piece from scalar s0 (transfer function v0, interval i0; tf_point_at) to s1 (v1, i1)
+// The piece from scalar s0 (transfer function v0, interval i0: TFInterval) to s1 (v1, i1)
 // over world length len, cut at the control points it crosses, in ray order.
 vec4 integrate_piece(float s0, vec4 v0, int i0, float s1, vec4 v1, int i1, float len) {
     if (i0 == i1) return integrate_cut(v0, v1, len);

@@ -167,6 +167,7 @@ class Raycaster(GLOwner):
         self._value_scale = 1.0
         self._table: PreintegrationTable | None = None
         self._table_tex: Any = None
+        self._table_checked: tuple[Any, ...] | None = None
         self._tf_points_tex: Any = None
         self._tf_points_key: TransferFunction | None = None
         self._limits_tex: Any = None
@@ -258,10 +259,14 @@ class Raycaster(GLOwner):
         """
         s = settings or self.settings
         n_bins = s.bins_for(volume, tf)
-        self._check_table(n_bins, s.table_thickness_slices)
-        return table_for(tf, volume.scalar_range, s.step_for(volume, tf), n_bins=n_bins,
-                         n_slices=s.table_thickness_slices, log_base=2.0, encoding="normalized", dtype="float32",
-                         align_nodes=True)
+        step = s.step_for(volume, tf)
+        key = (tf, volume.scalar_range, step, n_bins, s.table_thickness_slices)
+        if key != self._table_checked:  # checked once: a built (cached) table needs no memory again
+            self._check_table(n_bins, s.table_thickness_slices)
+        table = table_for(tf, volume.scalar_range, step, n_bins=n_bins, n_slices=s.table_thickness_slices,
+                          log_base=2.0, encoding="normalized", dtype="float32", align_nodes=True)
+        self._table_checked = key
+        return table
 
     def _check_table(self, n_bins: int, n_slices: int) -> None:
         """Refuse a table this GL cannot hold, or this machine cannot build, before any
