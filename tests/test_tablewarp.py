@@ -115,6 +115,8 @@ def test_sizes_are_refused_before_anything_is_allocated():
         RenderSettings(table_scalar_bins=2048, table_thickness_slices=64)
     with pytest.raises(ValueError, match="table_warp"):
         RenderSettings(table_warp="yes")
+    with pytest.raises(ValueError, match="optics='vtk'"):
+        RenderSettings(table_warp="on", optics="vtk")
     assert table_build_bytes(128, 8, warp=True) >= 128 * 128 * 9 * 113  # measured with tracemalloc
     with pytest.raises(ValueError, match="n_bins=2048 with n_slices=64"):
         check_table_size(2048, 64, warp=True)

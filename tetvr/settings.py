@@ -59,9 +59,9 @@ class RenderSettings:
         changes along thick opaque segments (``bench/speed_accuracy.py``).
     table_tolerance : the RMS per-segment error (premultiplied RGBA) an ``"auto"`` table
         size aims for; the cheapest table estimated within it is used (if none is, the
-        most accurate auto size). The default 5e-5 (an 8-bit step is 3.9e-3) is met on
-        the synthetic benchmark scenes (106-110 dB from the reference), not on two CFD
-        meshes with spiky transfer functions (512 bins: 76 and 89 dB).
+        most accurate auto size; with ``table_warp="auto"`` a warped one). The default 5e-5
+        (an 8-bit step is 3.9e-3) is met on the synthetic benchmark scenes (106-110 dB from
+        the reference), not on CFD meshes with spiky transfer functions (see ``table_warp``).
     table_align_nodes : place the table's scalar nodes so that the transfer function's
         control points, the sharpest kinks first, fall on nodes
         (:func:`tetvr.preintegrate.aligned_scalar_range`; default ``True``), rather than
@@ -71,9 +71,13 @@ class RenderSettings:
     table_warp : ``"auto"`` (default), ``"on"`` or ``"off"``: a *warped* table, whose scalar
         nodes are dense where the transfer function varies and lie on its control points
         (:mod:`tetvr.tablewarp`), instead of evenly spaced ones. ``"auto"`` takes one where
-        the scene's estimated error (:mod:`tetvr.tablesize`) says even nodes fall short:
-        isosurface-like transfer functions, whose narrow spikes fall between even nodes.
-        Both GPU methods read it through a small node-index texture.
+        the scene's estimated error (:mod:`tetvr.tablesize`) says no even table meets the
+        tolerance: isosurface-like transfer functions, whose narrow spikes fall between even
+        nodes (on the bluntfin and pipe-flow meshes 35-64 dB even, 62-97 dB warped;
+        docs/limits.md). Both GPU methods read it through a small texture that gives the
+        node index and, for the "normalized" encoding, the exact optical depth per scalar
+        cell (an opaque spike's -ln(1 - a) is log-singular, which no table interpolates).
+        Not with ``optics="vtk"``.
     table_dtype : ``"float32"`` or ``"uint8"`` storage of the table.
     table_encoding : ``"normalized"`` stores colour/alpha and optical depth per unit
         length, so that alpha is exact in the thickness and only the (slowly varying)
@@ -140,6 +144,9 @@ class RenderSettings:
             raise ValueError(f"optics must be one of {OPTICS}, got {self.optics!r}")
         if self.table_warp not in TABLE_WARPS:
             raise ValueError(f"table_warp must be one of {TABLE_WARPS}, got {self.table_warp!r}")
+        if self.table_warp == "on" and self.optics == "vtk":
+            raise ValueError("table_warp='on' needs the optical depth of a segment, which optics='vtk' (the mean of its "
+                             "end extinctions) does not use; use table_warp='auto' or 'off' with it")
         if self.table_dtype not in TABLE_DTYPES:
             raise ValueError(f"table_dtype must be one of {TABLE_DTYPES}, got {self.table_dtype!r}")
         for name, lo, hi in (("table_scalar_bins", 2, 2048), ("table_thickness_slices", 1, 256)):
