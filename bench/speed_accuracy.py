@@ -100,6 +100,14 @@ def scenes(quick: bool):
         _tf(r, [(0, 0.9), (1, 0.9)], 6)
     c = case("camera_inside")
     yield "camera inside", c.mesh, c.camera, c.tf
+    # Cell data: an element field, constant in each cell and jumping at faces (four levels
+    # of a smooth field at the cells' centroids, as a material or stress-class map).
+    g = synthetic.cube(16)
+    x = g.centroids
+    levels = np.floor(4.0 * (0.5 + 0.5 * np.sin(5.0 * x[:, 0]) * np.cos(4.0 * x[:, 1] + 2.0 * x[:, 2]))) / 4.0
+    g = g.with_cell_scalars(levels, name="level")
+    yield "cell data (4 levels)", g, Camera.fit(g, direction=(-0.6, -0.4, -1.0)), \
+        _tf(g, [(0, 0.05), (0.5, 0.3), (1, 0.7)], 6)
     for name, field in REAL_MESHES:
         if quick and name.startswith("combustor"):
             continue
