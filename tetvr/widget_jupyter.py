@@ -303,11 +303,16 @@ class Viewer:
             self._pending = (rgb, frame.final)  # a frame not yet taken is replaced
         if frame.final:
             self._last_full = frame
-        kind = "full" if frame.final else "preview"
-        text = f"{kind} {frame.size[0]}×{frame.size[1]} · {frame.seconds * 1e3:.0f} ms"
+        if not frame.final:
+            # Previews leave the status at "rendering…": one message fewer per frame for the
+            # browser to lay out while the pictures stream.
+            self._post(self.canvas.request_draw)
+            return
+        text = f"full {frame.size[0]}×{frame.size[1]} · {frame.seconds * 1e3:.0f} ms"
+
         def show() -> None:
             self.canvas.request_draw()
-            self._set_status(text, final=frame.final)
+            self._set_status(text, final=True)
         self._post(show)
 
     def _image_frame(self) -> NDArray[np.uint8] | None:
