@@ -301,8 +301,18 @@ def test_clip_box(raycaster):
 # ---------------------------------------------------------------------------------
 
 
+def _read(rel: str) -> Volume:
+    """A volume of ../shared/data, or skip with the reason (the file, or the reader's
+    optional dependency, e.g. SimpleITK for NRRD and MetaImage, is missing)."""
+    path = shared_file(rel)
+    try:
+        return read_volume(path)
+    except ImportError as exc:
+        pytest.skip(f"cannot read {path.name}: {exc}")
+
+
 def _ct_head():
-    vol = read_volume(shared_file("volumes/headsq/quarter.nhdr"))
+    vol = _read("volumes/headsq/quarter.nhdr")
     tf = TransferFunction(color=((0, 0.2, 0.1, 0.05), (600, 0.9, 0.5, 0.3), (1200, 1, 0.9, 0.8), (3926, 1, 1, 1)),
                           opacity=((0, 0), (500, 0), (700, 0.3), (1000, 0.05), (1150, 0.0), (1300, 0.6), (3926, 0.9)),
                           unit_distance=10.0)
@@ -310,14 +320,14 @@ def _ct_head():
 
 
 def _mr_head():
-    vol = read_volume(shared_file("volumes/HeadMRVolume.mhd"))  # uint8
+    vol = _read("volumes/HeadMRVolume.mhd")  # uint8
     tf = TransferFunction(color=((0, 0, 0, 0), (60, 0.6, 0.4, 0.3), (140, 1, 0.8, 0.7), (255, 1, 1, 1)),
                           opacity=((0, 0), (40, 0), (90, 0.15), (160, 0.4), (255, 0.8)), unit_distance=8.0)
     return vol, tf, _camera(vol, (0.8, -1.0, 0.3)), (48, 48)
 
 
 def _aneurism():
-    full = read_volume(shared_file("volumes/aneurism.vti"))  # uint8, 256^3: an 80^3 block of vessels
+    full = _read("volumes/aneurism.vti")  # uint8, 256^3: an 80^3 block of vessels
     k, j, i = 122, 70, 86
     vol = Volume.from_array(full.data[k:k + 80, j:j + 80, i:i + 80], spacing=full.spacing,
                             origin=full.index_to_world[:3, :3] @ (i, j, k) + full.origin, direction=full.direction)
