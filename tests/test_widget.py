@@ -602,6 +602,12 @@ def test_viewer_resizes_with_the_page_keeping_the_aspect(tmp_path):
         assert v.loop.wait_idle(10) and v.model.size == (80, 60)
         v._image_event({"type": "resize", "width": 200.0, "height": 150.0, "ratio": 1.0})
         assert v.loop.wait_idle(10) and v.model.size == (200, 150) and v._image_frame().shape == (150, 200, 3)
+        # Each frame goes out once (a second draw request finds nothing new to send) ...
+        assert v._image_frame() is None
+        # ... except to a new view, which reports its size: it gets the last frame again.
+        v._image_event({"type": "resize", "width": 200.0, "height": 150.0, "ratio": 1.0})
+        assert v._image_frame().shape == (150, 200, 3) and v._image_frame() is None
+        assert v.canvas.quality == 100  # PNG: no lossless re-send of a preview after it
     finally:
         v.close()
 

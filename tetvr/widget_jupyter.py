@@ -3,8 +3,8 @@
 ``jupyter_rfb`` (the remote frame buffer pygfx, vispy and fastplotlib use) carries the
 picture and the input: it throttles pointer and wheel events in the browser, keeps at
 most two frames in flight (the browser acknowledges each), sends JPEG while frames keep
-coming and a lossless PNG when they stop, and reports the size the picture really has
-on the page. This module only connects it to the render loop:
+coming and a lossless PNG when they stop (here: PNG throughout, see ``_build``), and
+reports the size the picture really has on the page. This module only connects it to the render loop:
 
 * browser events -> :meth:`RenderLoop.update` (the wanted camera, transfer function,
   size); nothing renders on the kernel's threads;
@@ -181,6 +181,7 @@ class Viewer:
         self._slot_lock = threading.Lock()
         self._pending: tuple[NDArray[np.uint8], bool] | None = None
         self._shown: tuple[NDArray[np.uint8], bool] | None = None
+        self._resend = False
         self._last_full: Frame | None = None
         self._drag: tuple[float, float, bool] | None = None
         try:
@@ -202,6 +203,9 @@ class Viewer:
         self.canvas = _Canvas(self._image_frame, self._image_event, css_width="100%",
                               css_height=f"{height + 2}px", resizable=False, cursor="grab")
         self.canvas.max_buffered_frames = 2
+        # Every frame as PNG: previews are small, and a JPEG preview would be followed
+        # 0.3 s later by jupyter_rfb's lossless copy of it, in the way of the full frame.
+        self.canvas.quality = 100
         self.canvas.add_class("tetvr-image")  # names for styling and the browser tests
         self.status = w.HTML(value="rendering…")
         self.status.add_class("tetvr-status")
@@ -318,14 +322,13 @@ class Viewer:
     def _image_frame(self) -> NDArray[np.uint8] | None:
         with self._slot_lock:
             item, self._pending = self._pending, None
+            if item is None and self._resend:
+                item = self._shown  # a new view or a resize: the last frame again
+            self._resend = False
             if item is None:
-                item = self._shown  # a redraw (a new view, a resize): the last frame again
+                return None  # an older request whose frame a later one took: nothing to send
             self._shown = item
-        if item is None:
-            return None
-        rgb, final = item
-        self.canvas.quality = 100 if final else 80  # full frames as PNG at once
-        return rgb
+        return item[0]
 
     def _set_status(self, text: str, *, final: bool) -> None:
         colour = "#444" if final else "#a60"
@@ -391,6 +394,8 @@ class Viewer:
         if size != tuple(self.model.size):
             self.loop.update(lambda m: setattr(m, "size", size), camera=False, final=True)
         else:
+            with self._slot_lock:
+                self._resend = True
             self.canvas.request_draw()  # a new view: send it the last frame
 
     # ---- transfer-function editor ----
