@@ -51,7 +51,7 @@ def _variation_per_cell(tf: TransferFunction, lo: float, hi: float, cells: int) 
     v = dv[:, 0] + dv[:, 1:].max(axis=1)
     mid = 0.5 * (s[1:] + s[:-1])
     cell = np.clip(((mid - lo) / (hi - lo) * cells).astype(np.int64), 0, cells - 1)
-    return np.bincount(cell, weights=v, minlength=cells)
+    return np.bincount(cell, weights=v, minlength=cells).astype(np.float64)
 
 
 def warped_nodes(tf: TransferFunction, scalar_range: tuple[float, float], n_bins: int, *,
