@@ -257,6 +257,7 @@ def chart(result: dict, path: Path) -> None:
     for a, title, unit in ((ax[1], "bricks: time per view change", "s"),
                            (ax[2], "bricks: peak memory per worker", "MiB")):
         a.set_xscale("log", base=2)
+        a.set_yscale("log")
         a.set_xticks([1, 2, 4, 8], ["1", "2", "4", "8"])
         a.set_xlabel("bricks P (2 workers)")
         a.set_ylabel(unit)

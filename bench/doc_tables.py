@@ -107,7 +107,9 @@ def _dist() -> dict[str, Any]:
 
 def _when(r: dict[str, Any]) -> str:
     m = r.get("machine", {})
-    return f"{m.get('cpu_count', '?')} cores, {r['date'][:10]}, `bench/results/distributed.json`"
+    load = r.get("load_average_1_5_15_min")
+    shared = f", shared with other jobs (load average {load['start'][2]:.0f} at the last run)" if load else ""
+    return f"{m.get('cpu_count', '?')} cores{shared}, {r['date'][:10]}, `bench/results/distributed.json`"
 
 
 def distributed_series() -> str:
