@@ -93,12 +93,13 @@ class Whole:
 
 
 def part_mesh(points: ArrayLike, tets: ArrayLike, scalars: ArrayLike, whole: Whole, *,
-              scalar_name: str = "scalars") -> TetMesh:
+              scalar_name: str = "scalars", cell_scalars: ArrayLike | None = None) -> TetMesh:
     """The cells ``tets`` of ``points`` as a mesh of their own points that renders as a part
     of ``whole``: its float32 origin, scalar range, longest edge and segment sample are the
     whole's (so the GPU builds the whole's table and rounds coordinates as the whole does).
 
-    Cells flat to rounding (slivers of a cut) are dropped.
+    Cells flat to rounding (slivers of a cut) are dropped. ``cell_scalars`` (one per row
+    of ``tets``) make it cell data, as the whole is.
     """
     from .tablesize import SegmentSample
 
@@ -110,7 +111,7 @@ def part_mesh(points: ArrayLike, tets: ArrayLike, scalars: ArrayLike, whole: Who
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # slivers of a cut below the flatness bound: dropped
         sub = TetMesh.from_arrays(pts[used], local.reshape(-1, 4), np.asarray(scalars, dtype=np.float64)[used],
-                                  scalar_name=scalar_name)
+                                  scalar_name=scalar_name, cell_scalars=cell_scalars)
     sub = sub.with_float32_origin(whole.float32_origin)
     # Cached properties seeded with the whole's values (a frozen dataclass: in the instance).
     sub.__dict__["max_edge"] = float(whole.max_edge)
@@ -124,10 +125,12 @@ def part_mesh(points: ArrayLike, tets: ArrayLike, scalars: ArrayLike, whole: Who
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Brick:
-    """A leaf of the k-d tree: its tets, as ids of the tree's points (empty in a plan)."""
+    """A leaf of the k-d tree: its tets, as ids of the tree's points (empty in a plan), and
+    for cell data their values (a cut cell's pieces carry its value)."""
 
     index: int
     tets: NDArray[np.int64]
+    cells: NDArray[np.float64] | None = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -180,7 +183,8 @@ class BrickTree:
     def brick_mesh(self, brick: Brick) -> TetMesh:
         """One brick as a mesh of its own points that renders as a part of the whole
         (:func:`part_mesh`)."""
-        return part_mesh(self.points, brick.tets, self.scalars, self.whole, scalar_name=self.mesh.scalar_name)
+        return part_mesh(self.points, brick.tets, self.scalars, self.whole, scalar_name=self.mesh.scalar_name,
+                         cell_scalars=brick.cells)
 
     def visibility_order(self, camera: Camera) -> list[int]:
         return visibility_order(self.root, camera)
@@ -211,13 +215,13 @@ def kd_bricks(mesh: TetMesh, n_bricks: int, *, cut: bool = True) -> BrickTree:
     ([96, 96, 96, 96], True, 0)
     """
     _check_n_bricks(n_bricks, mesh.n_tets)
-    _no_cell_data(mesh)
     state = {"points": mesh.points, "scalars": mesh.scalars}
     counter = iter(range(n_bricks))
+    cell_data = mesh.cell_scalars is not None
 
-    def build(tets: NDArray[np.int64], n: int) -> "Split | Brick":
+    def build(tets: NDArray[np.int64], n: int, vals: NDArray[np.float64]) -> "Split | Brick":
         if n == 1:
-            return Brick(next(counter), tets)
+            return Brick(next(counter), tets, vals if cell_data else None)
         pts = state["points"]
         corners = pts[tets]
         lo, hi, c = corners.min(axis=1), corners.max(axis=1), corners.mean(axis=1)
@@ -226,7 +230,8 @@ def kd_bricks(mesh: TetMesh, n_bricks: int, *, cut: bool = True) -> BrickTree:
         for axis in np.argsort(-(c.max(axis=0) - c.min(axis=0)), kind="stable").tolist():
             plane, low = _separating_plane(lo[:, axis], hi[:, axis], want)
             if plane is not None:
-                return Split(axis, plane, build(tets[low], n_low), build(tets[~low], n - n_low), 0, True)
+                return Split(axis, plane, build(tets[low], n_low, vals[low]),
+                             build(tets[~low], n - n_low, vals[~low]), 0, True)
         axis = int(np.argmax(c.max(axis=0) - c.min(axis=0)))
         order = np.argsort(c[:, axis], kind="stable")
         plane = 0.5 * (c[order[want - 1], axis] + c[order[want], axis])
@@ -234,22 +239,25 @@ def kd_bricks(mesh: TetMesh, n_bricks: int, *, cut: bool = True) -> BrickTree:
             low = np.zeros(len(tets), dtype=bool)
             low[order[:want]] = True
             separable = not np.any((lo[:, axis] < plane) & (hi[:, axis] > plane))
-            return Split(axis, float(plane), build(tets[low], n_low), build(tets[~low], n - n_low), 0, separable)
+            return Split(axis, float(plane), build(tets[low], n_low, vals[low]),
+                         build(tets[~low], n - n_low, vals[~low]), 0, separable)
         plane = _plane_off_vertices(pts[np.unique(tets), axis], plane)
-        state["points"], state["scalars"], below, above, n_cut = cut_at_plane(
-            state["points"], state["scalars"], tets, axis, float(plane))
+        state["points"], state["scalars"], below, above, v_below, v_above, n_cut = cut_at_plane(
+            state["points"], state["scalars"], tets, axis, float(plane), vals)
         if len(below) == 0 or len(above) == 0:
             raise ValueError(f"cannot split {len(tets)} cells into {n} bricks: a plane leaves one side empty")
-        return Split(axis, float(plane), build(below, n_low), build(above, n - n_low), n_cut, True)
+        return Split(axis, float(plane), build(below, n_low, v_below), build(above, n - n_low, v_above), n_cut, True)
 
-    root = build(mesh.tets.astype(np.int64), int(n_bricks))
+    cells = mesh.cell_scalars if cell_data else np.zeros(mesh.n_tets)
+    root = build(mesh.tets.astype(np.int64), int(n_bricks), np.asarray(cells, dtype=np.float64))
     return BrickTree(root, state["points"], state["scalars"], mesh)
 
 
 def _no_cell_data(mesh: TetMesh) -> None:
     if mesh.cell_scalars is not None:
-        raise NotImplementedError(f"bricks of a mesh with cell data ({mesh.scalar_name!r}) are not made yet: split "
-                                  "mesh.averaged() (the field averaged to the points), or read with cell_data='average'")
+        raise NotImplementedError(f"solver pieces with cell data ({mesh.scalar_name!r}) are not redistributed yet: "
+                                  "read the pieces with cell_data='average', or merge them and split the mesh "
+                                  "(kd_bricks carries cell data)")
 
 
 def _check_n_bricks(n_bricks: Any, n_tets: int) -> None:
@@ -297,10 +305,13 @@ def _separating_plane(lo: NDArray[np.float64], hi: NDArray[np.float64], want: in
 
 
 def cut_at_plane(points: NDArray[np.float64], scalars: NDArray[np.float64], tets: NDArray[np.int64], axis: int,
-                 plane: float) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64],
-                                        NDArray[np.int64], int]:
+                 plane: float, cells: NDArray[np.float64] | None = None
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64], NDArray[np.int64],
+                            NDArray[np.float64], NDArray[np.float64], int]:
     """Cut ``tets`` at the plane ``x[axis] = plane``. Returns the points and scalars with
-    the edge crossings appended, the tets below and above, and how many cells were cut.
+    the edge crossings appended, the tets below and above, the cell values of those (each
+    piece the value of the cell it was cut from; ``cells`` gives one per row of ``tets``
+    for cell data, zeros without), and how many cells were cut.
 
     A cell with no vertex above the plane is below (one touching it from below included),
     and the reverse. A cut tet with one vertex on one side leaves a tet there and a wedge
@@ -312,13 +323,17 @@ def cut_at_plane(points: NDArray[np.float64], scalars: NDArray[np.float64], tets
     """
     from .cells import split_cells
 
+    vals = np.zeros(len(tets)) if cells is None else np.asarray(cells, dtype=np.float64)
     d = points[tets, axis] - plane
     n_below = (d < 0).sum(axis=1)
     n_above = (d > 0).sum(axis=1)
-    keep_low, keep_high = tets[n_above == 0], tets[(n_below == 0) & (n_above > 0)]
+    low_rows, high_rows = n_above == 0, (n_below == 0) & (n_above > 0)
+    keep_low, keep_high = tets[low_rows], tets[high_rows]
+    keep_low_v, keep_high_v = vals[low_rows], vals[high_rows]
     straddle = (n_below > 0) & (n_above > 0)
     if not straddle.any():
-        return points, scalars, keep_low, keep_high, 0
+        return points, scalars, keep_low, keep_high, keep_low_v, keep_high_v, 0
+    vs = vals[straddle]
     below = d < 0  # a vertex on the plane goes with those above
     # Each cut tet's vertices, those below first.
     order = np.argsort(~below[straddle], axis=1, kind="stable")
@@ -347,6 +362,8 @@ def cut_at_plane(points: NDArray[np.float64], scalars: NDArray[np.float64], tets
     pieces_wedge: list[NDArray[np.int64]] = []
     side_tet: list[NDArray[np.bool_]] = []
     side_wedge: list[NDArray[np.bool_]] = []
+    val_tet: list[NDArray[np.float64]] = []  # the value of the cell each piece is cut from
+    val_wedge: list[NDArray[np.float64]] = []
     one = t[nb == 1]  # one below: a tet below, a wedge above
     if len(one):
         v0, a, b, c = one.T
@@ -355,6 +372,8 @@ def cut_at_plane(points: NDArray[np.float64], scalars: NDArray[np.float64], tets
         side_tet.append(np.ones(len(one), dtype=bool))
         pieces_wedge.append(np.stack([a, b, c, xa, xb, xc], 1))
         side_wedge.append(np.zeros(len(one), dtype=bool))
+        val_tet.append(vs[nb == 1])
+        val_wedge.append(vs[nb == 1])
     three = t[nb == 3]  # one above: a wedge below, a tet above
     if len(three):
         a, b, c, v0 = three.T
@@ -363,27 +382,33 @@ def cut_at_plane(points: NDArray[np.float64], scalars: NDArray[np.float64], tets
         side_tet.append(np.zeros(len(three), dtype=bool))
         pieces_wedge.append(np.stack([a, b, c, xa, xb, xc], 1))
         side_wedge.append(np.ones(len(three), dtype=bool))
+        val_tet.append(vs[nb == 3])
+        val_wedge.append(vs[nb == 3])
     two = t[nb == 2]  # two on each side: a wedge each
     if len(two):
         a, b, c, dd = two.T
         xac, xad, xbc, xbd = x(a, c), x(a, dd), x(b, c), x(b, dd)
         pieces_wedge += [np.stack([a, xac, xad, b, xbc, xbd], 1), np.stack([c, xac, xbc, dd, xad, xbd], 1)]
         side_wedge += [np.ones(len(two), dtype=bool), np.zeros(len(two), dtype=bool)]
+        val_wedge += [vs[nb == 2], vs[nb == 2]]
     all_pts = np.concatenate([points, new_pts])
     all_s = np.concatenate([scalars, new_s])
     tet_in = np.concatenate(pieces_tet) if pieces_tet else np.zeros((0, 4), dtype=np.int64)
     wedge_in = np.concatenate(pieces_wedge) if pieces_wedge else np.zeros((0, 6), dtype=np.int64)
     split = split_cells(all_pts, [("tetra", tet_in), ("wedge", wedge_in)])
     is_low = np.concatenate(side_tet + side_wedge)[split.parent]
+    cut_v = np.concatenate(val_tet + val_wedge)[split.parent]
     all_pts = split.points
     all_s = split.extend(all_s)
     cut_tets = split.tets.astype(np.int64)
     s = np.sort(cut_tets, axis=1)
     ok = np.all(s[:, 1:] != s[:, :-1], axis=1)  # pieces of a vertex on the plane repeat it: flat
-    cut_tets, is_low = cut_tets[ok], is_low[ok]
+    cut_tets, is_low, cut_v = cut_tets[ok], is_low[ok], cut_v[ok]
     low = np.concatenate([keep_low, cut_tets[is_low]])
     high = np.concatenate([keep_high, cut_tets[~is_low]])
-    return all_pts, all_s, low, high, int(straddle.sum())
+    low_v = np.concatenate([keep_low_v, cut_v[is_low]])
+    high_v = np.concatenate([keep_high_v, cut_v[~is_low]])
+    return all_pts, all_s, low, high, low_v, high_v, int(straddle.sum())
 
 
 def visibility_order(tree: "BrickTree | Split | Brick", camera: Camera) -> list[int]:
@@ -532,7 +557,7 @@ def clip_to_box(points: NDArray[np.float64], tets: NDArray[np.int64], scalars: N
     points, tets and scalars, and how many cells were cut."""
     n_cut = 0
     for axis, plane, low in path:
-        points, scalars, below, above, k = cut_at_plane(points, scalars, tets, axis, plane)
+        points, scalars, below, above, _, _, k = cut_at_plane(points, scalars, tets, axis, plane)
         tets = below if low else above
         n_cut += k
     return points, tets, scalars, n_cut
