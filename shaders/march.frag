@@ -68,7 +68,15 @@ void main() {
     if (entry >= 0) {
         tet = entry >> 2;
         face = entry & 3;
-        t_in = max(plane_t(face_plane(tet, face), o, d), u_near);
+        // Where the ray enters its first tet, from every plane it enters by: the face it
+        // was drawn for may be seen edge-on (the eye in its plane), where that plane alone
+        // says nothing of where the ray comes in.
+        t_in = u_near;
+        for (int k = 0; k < 4; ++k) {
+            vec4 plane = face_plane(tet, k);
+            float den = dot(plane.xyz, d);
+            if (den < 0.0) t_in = max(t_in, -(dot(plane.xyz, o) + plane.w) / den);
+        }
     } else {
         tet = -2 - entry;
         face = -1;
