@@ -28,6 +28,10 @@ uniform sampler2D u_color_in;
 uniform sampler2D u_state_in;
 uniform isampler2D u_last_in;
 #endif
+// An entry face whose unit normal meets the ray's direction at a cosine below this is
+// taken as seen edge-on.
+#define GRAZING 1.0e-4
+
 uniform int u_max_steps;      // bound on tets per ray and layer (a walk caught by rounding)
 uniform float u_opaque;       // stop once alpha reaches this (early ray termination)
 
@@ -68,14 +72,21 @@ void main() {
     if (entry >= 0) {
         tet = entry >> 2;
         face = entry & 3;
-        // Where the ray enters its first tet, from every plane it enters by: the face it
-        // was drawn for may be seen edge-on (the eye in its plane), where that plane alone
-        // says nothing of where the ray comes in.
-        t_in = u_near;
-        for (int k = 0; k < 4; ++k) {
-            vec4 plane = face_plane(tet, k);
-            float den = dot(plane.xyz, d);
-            if (den < 0.0) t_in = max(t_in, -(dot(plane.xyz, o) + plane.w) / den);
+        vec4 entry_plane = face_plane(tet, face);
+        float entry_den = dot(entry_plane.xyz, d);
+        if (entry_den < -GRAZING * per_t) {
+            t_in = max(-(dot(entry_plane.xyz, o) + entry_plane.w) / entry_den, u_near);
+        } else {
+            // The face it was drawn for is seen edge-on (the eye in its plane), where its
+            // plane says nothing of where the ray comes in: the last of the other planes
+            // it enters by does. (Only then: a plane almost along the ray gives a t that
+            // rounding moves far, and the faces shared by bricks must give both bricks one t.)
+            t_in = u_near;
+            for (int k = 0; k < 4; ++k) {
+                vec4 plane = face_plane(tet, k);
+                float den = dot(plane.xyz, d);
+                if (k != face && den < 0.0) t_in = max(t_in, -(dot(plane.xyz, o) + plane.w) / den);
+            }
         }
     } else {
         tet = -2 - entry;
