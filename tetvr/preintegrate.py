@@ -635,7 +635,9 @@ def _fill_runs_uneven(rgb: NDArray[np.float64], color: NDArray[np.float64], tau_
                 phi = np.where(th > 1e-12, -e1 / np.where(th > 0, th, 1.0), 1.0 - 0.5 * th)
             e1 += 1.0  # each bin's transmittance
             # Transmittance after each bin, zero past the run's last bin (run r crosses bins 0 .. r).
-            after = np.cumprod(e1, axis=2)
+            # Products of many bins may underflow to subnormals or 0: light gone, not an error.
+            with np.errstate(under="ignore"):
+                after = np.cumprod(e1, axis=2)
             after *= np.tri(nb - i)[:, None, :]
             before = np.empty_like(after)
             before[..., 0] = 1.0
