@@ -313,7 +313,9 @@ def test_model_renders_a_constant_field(tmp_path):
     assert lo == 5.0 and hi > lo
 
 
-def test_model_rebuilds_its_renderer_when_the_settings_change(tmp_path, monkeypatch):
+def _fake_renderers(monkeypatch) -> list:
+    """tetvr.gl.renderer.Renderer replaced by a RecordingRenderer that remembers its
+    settings and whether it was released; returns the list of those made."""
     import tetvr.gl.renderer
 
     made = []
@@ -328,6 +330,11 @@ def test_model_rebuilds_its_renderer_when_the_settings_change(tmp_path, monkeypa
             self.released = True
 
     monkeypatch.setattr(tetvr.gl.renderer, "Renderer", FakeRenderer)
+    return made
+
+
+def test_model_rebuilds_its_renderer_when_the_settings_change(tmp_path, monkeypatch):
+    made = _fake_renderers(monkeypatch)
     scene = _scene(tmp_path)
     model = ViewerModel(scene)
     model.final()
@@ -789,20 +796,7 @@ def test_fused_frames_from_the_render_process_equal_tetvr_fuse():
 
 
 def test_a_viewer_nobody_sees_frees_its_renderer_until_the_next_frame(tmp_path, monkeypatch):
-    import tetvr.gl.renderer
-
-    made = []
-
-    class FakeRenderer(RecordingRenderer):
-        def __init__(self, settings=None):
-            super().__init__()
-            self.settings, self.released = settings, False
-            made.append(self)
-
-        def release(self):
-            self.released = True
-
-    monkeypatch.setattr(tetvr.gl.renderer, "Renderer", FakeRenderer)
+    made = _fake_renderers(monkeypatch)
     pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
     from tetvr.widget import Viewer
 

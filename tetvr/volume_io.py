@@ -508,16 +508,6 @@ def read_metaimage(path: str | os.PathLike[str], *, space: str = "LPS") -> Volum
     dtype = np.dtype(_MET_TYPES[etype]).newbyteorder(">" if msb else "<")
     n_bytes = _check_declared(dims, dtype, f"MetaImage file {fname!r}")
 
-    def floats(keys: tuple[str, ...], shown: str, count: int, default: ArrayLike) -> NDArray[np.float64]:
-        for k in keys:
-            if k in fields:
-                vals = _header_numbers(fields[k], shown, "MetaImage", fname)
-                if len(vals) != count or not all(math.isfinite(v) for v in vals):
-                    raise ValueError(f"MetaImage file {fname!r}: field '{shown}' must be {count} finite numbers, "
-                                     f"got {fields[k]!r}")
-                return np.asarray(vals)
-        return np.asarray(default, dtype=np.float64)
-
     for keys, shown, count in ((("elementspacing", "elementsize"), "ElementSpacing", ndims),
                                (("offset", "origin", "position"), "Offset", ndims),
                                (("transformmatrix", "rotation", "orientation"), "TransformMatrix", ndims * ndims)):
