@@ -42,7 +42,7 @@ from .mesh import TetMesh
 from .settings import RenderSettings
 from .bricks import (Brick, BrickTree, Split, Whole, _check_n_bricks, clip_to_box, composite_over, kd_bricks,
                      leaf_boxes, leaf_paths, merge_parts, part_mesh, plan_bricks, select_cells, visibility_order)
-from .transfer import TransferFunction
+from .transfer import TransferFunction, default_unit_distance
 
 __all__ = ["ClusterBricks", "distribute_mesh", "distribute_pieces", "render_bricks", "render_pieces", "render_series",
            "series_sources", "cluster_client", "worker_renderer",
@@ -295,8 +295,8 @@ def render_series(
                 camera = Camera.fit(_Bounds(np.stack([lo, hi])))  # type: ignore[arg-type]
             if tf is None:
                 s_lo, s_hi = _tf_range(min(r[0] for _, r in got), max(r[1] for _, r in got))
-                diag = float(np.linalg.norm(hi - lo))
-                tf = TransferFunction.preset("viridis", (s_lo, s_hi), opacity=0.5, unit_distance=max(diag / 20, 1e-30))
+                tf = TransferFunction.preset("viridis", (s_lo, s_hi), opacity=0.5,
+                                             unit_distance=default_unit_distance(np.stack([lo, hi])))
         futures = [c.submit(_render_step, s.source, camera, tf, size, settings, scalars, component, name, background,
                             pure=False)
                    for s, name in zip(items, names)]

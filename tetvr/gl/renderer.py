@@ -92,6 +92,12 @@ class Renderer(GLOwner):
     chunk_tets : the most tets drawn at once (default 2M, capped by the GL's storage
         buffer size); larger meshes are classified and drawn in sorted chunks.
 
+    One renderer holds one GL context. It may be shared by threads: each call takes the
+    context's lock and makes the context current for its duration, so a second thread
+    waits for the first and both get the frames they would get alone (moderngl holds
+    Python's interpreter lock while the GL draws, so threads do not render in parallel;
+    the Jupyter viewer renders in a child process for that reason).
+
     Examples
     --------
     >>> with Renderer() as r:                                  # doctest: +SKIP
