@@ -101,6 +101,24 @@ def spiky_tf() -> str:
             "median of 3).\n\n" + "\n".join(rows))
 
 
+def degenerate() -> str:
+    """Faces through the eye: the sweep of sizes and jittered cameras (bench/degenerate.py)."""
+    r = _load("degenerate.json")
+    names = {"raymarch": "tet marching (default)", "projected": "projected tetrahedra"}
+    rows = ["| method | views | NaN pixels | worst forward error | views with a pixel > 0.05 | pixels > 0.05 "
+            "| worst backward error |", "|---|---:|---:|---:|---:|---:|---:|"]
+    for method, s in r["summary"].items():
+        back = f"{s['backward_max']:.2g}"
+        if s.get("backward_not_computed"):
+            back += f" ({s['backward_not_computed']} views not computed)"
+        rows.append(f"| {names.get(method, method)} | {s['views']} | {s['nan_pixels']} | {s['forward_max']:.2g} "
+                    f"| {s['views_with_forward_over_005']} | {s['pixels_with_forward_over_005']} | {back} |")
+    sizes = r.get("sizes_done", r["sizes"])
+    return (f"Measured by `bench/degenerate.py`: image sizes {sizes[0]} to {sizes[-1]} "
+            f"({len(sizes)} sizes), {r['cameras_per_scene']} jittered cameras per scene, two scenes; backward error "
+            f"over rays within 1/{round(1 / r['jitter_px'])} px (`bench/results/degenerate.json`).\n\n" + "\n".join(rows))
+
+
 def _dist() -> dict[str, Any]:
     return _load("distributed.json")
 
@@ -272,7 +290,8 @@ def viewer_latency() -> str:
 
 TABLES: dict[str, Callable[[], str]] = {"viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages,
                                         "volume_accuracy": volume_accuracy,
-                                        "spiky_tf": spiky_tf, "distributed_series": distributed_series,
+                                        "spiky_tf": spiky_tf, "degenerate": degenerate,
+                                        "distributed_series": distributed_series,
                                         "distributed_bricks": distributed_bricks,
                                         "distributed_accuracy": distributed_accuracy,
                                         "distributed_projection": distributed_projection}
