@@ -364,26 +364,21 @@ def cut_at_plane(points: NDArray[np.float64], scalars: NDArray[np.float64], tets
     side_wedge: list[NDArray[np.bool_]] = []
     val_tet: list[NDArray[np.float64]] = []  # the value of the cell each piece is cut from
     val_wedge: list[NDArray[np.float64]] = []
-    one = t[nb == 1]  # one below: a tet below, a wedge above
-    if len(one):
-        v0, a, b, c = one.T
-        xa, xb, xc = x(v0, a), x(v0, b), x(v0, c)
-        pieces_tet.append(np.stack([v0, xa, xb, xc], 1))
-        side_tet.append(np.ones(len(one), dtype=bool))
+    # One vertex alone on its side (rows list the vertices below first): a tet on that side,
+    # a wedge on the other. x() is symmetric, so both cases cut the same edges.
+    for count, lone_below in ((1, True), (3, False)):
+        sel = nb == count
+        if not sel.any():
+            continue
+        rows = t[sel]
+        lone, (a, b, c) = (rows[:, 0], rows[:, 1:].T) if lone_below else (rows[:, 3], rows[:, :3].T)
+        xa, xb, xc = x(lone, a), x(lone, b), x(lone, c)
+        pieces_tet.append(np.stack([lone, xa, xb, xc], 1))
+        side_tet.append(np.full(len(rows), lone_below))
         pieces_wedge.append(np.stack([a, b, c, xa, xb, xc], 1))
-        side_wedge.append(np.zeros(len(one), dtype=bool))
-        val_tet.append(vs[nb == 1])
-        val_wedge.append(vs[nb == 1])
-    three = t[nb == 3]  # one above: a wedge below, a tet above
-    if len(three):
-        a, b, c, v0 = three.T
-        xa, xb, xc = x(a, v0), x(b, v0), x(c, v0)
-        pieces_tet.append(np.stack([v0, xa, xb, xc], 1))
-        side_tet.append(np.zeros(len(three), dtype=bool))
-        pieces_wedge.append(np.stack([a, b, c, xa, xb, xc], 1))
-        side_wedge.append(np.ones(len(three), dtype=bool))
-        val_tet.append(vs[nb == 3])
-        val_wedge.append(vs[nb == 3])
+        side_wedge.append(np.full(len(rows), not lone_below))
+        val_tet.append(vs[sel])
+        val_wedge.append(vs[sel])
     two = t[nb == 2]  # two on each side: a wedge each
     if len(two):
         a, b, c, dd = two.T
