@@ -227,7 +227,7 @@ def _tet_geometry(mesh: TetMesh, camera: Camera, rays: _EyeRays) -> _TetGeometry
     perturb_out = lead > 0
 
     # Scalar gradient from the barycentric gradients n_k / height_k (lambda_k = f_k / f_k(p_k)).
-    s = mesh.scalars[ids] if mesh.cell_scalars is None else np.repeat(mesh.cell_scalars[index, None], 4, axis=1)
+    s = mesh.scalars[ids] if mesh.cell_scalars is None else mesh.corner_scalars[index]
     grad = np.einsum("ij,ijk->ik", (s[:, 1:] - s[:, :1]) / height[:, 1:], n[:, 1:])
 
     return _TetGeometry(

@@ -184,7 +184,7 @@ def sample_segments(mesh: TetMesh, n: int = _N_SEGMENTS) -> SegmentSample:
     if mesh.cell_scalars is None:
         s = mesh.scalars[cells]  # (k, 4)
     else:  # constant in each cell
-        s = np.repeat(np.repeat(mesh.cell_scalars[order[:m], None], 4, axis=1), per_cell, axis=0)
+        s = np.repeat(mesh.corner_scalars[order[:m]], per_cell, axis=0)
     faces = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
     ends = []
     for _ in range(2):
