@@ -22,16 +22,22 @@ def test_every_shader_variant_compiles():
             r._program("tet", PERSPECTIVE_CORRECT=pc, TABLE_NORMALIZED=norm, NEAR_CROSSING=near, TABLE_CUBIC=cubic)
         for kind in ("floor", "depth"):
             r._program(kind, PERSPECTIVE_CORRECT=1)
+        for kind in ("classify_vtk", "vtk_pt"):  # VTK parity (optics="vtk")
+            r._program(kind)
         assert r.ctx.error == "GL_NO_ERROR"
 
 
-def test_every_gl_object_is_released():
+@pytest.mark.parametrize("optics", ["exact", "vtk"])
+def test_every_gl_object_is_released(optics):
     mesh = synthetic.cube(2)
-    r = Renderer(RenderSettings(table_scalar_bins=32, table_thickness_slices=4))
+    r = Renderer(RenderSettings(table_scalar_bins=32, table_thickness_slices=4, optics=optics))
     img = r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(32, 32))
     assert img.shape == (32, 32, 4)
     objects = r._gl_objects()
-    assert len(objects) >= 8  # programs, vao, buffers, table, target
+    # programs, vao, buffers, table (VTK parity: the vertex colours instead), target
+    assert len(objects) >= 8
+    if optics == "vtk":
+        assert r._parity is not None and r._parity.gl_objects()[0] in objects
     assert r.ctx.error == "GL_NO_ERROR"
     r.release()
     for obj in objects:

@@ -332,9 +332,11 @@ def test_compare_uses_paraviews_unit_distance_for_a_defaulted_scene(tmp_path):
 def test_state_renders_against_the_reference(parity):
     """The loaded state, GPU against the CPU reference in the same convention. Exact
     settings: measured 87.7 dB, max 0.0009 (the table's interpolation); bar max 2/255 with
-    no pixel beyond 1/255. Parity (VTK's formula, screen-linear interpolation, rounded to
-    8 bits like VTK's window) against the perspective-correct reference: measured 63.6 dB,
-    max 1.4/255 on 21 pixels; bar 55 dB, max 3/255."""
+    no pixel beyond 1/255. Parity takes VTK's projected tetrahedra step for step (checked
+    against VTK in test_parity_against_vtks_projected_tetra), and so departs from VTK's
+    formula as VTK does: the discretized colour map classified at the vertices blurs its
+    bands across cells, plus 8-bit truncation. Measured 49.7 dB, max 17.2/255, 2,029 pixels
+    beyond 1/255; bar 45 dB, max 24/255, at most 3,000 pixels beyond 1/255."""
     from tetvr.vtkcompare import quantize8
 
     scene = load_state(STATE, data_directory=MESHES, size=(120, 90), parity=parity)
@@ -345,7 +347,8 @@ def test_state_renders_against_the_reference(parity):
     assert want[..., 3].max() > 0.5 and (want[..., 3] > 0.01).mean() > 0.2  # a real picture
     err = np.abs(got.astype(np.float64) - want).max(axis=-1)
     value = psnr(got, want)
-    ok = (value >= 55 and err.max() <= 3 / 255) if parity else (err.max() <= 2 / 255 and not np.any(err > 1 / 255))
+    ok = ((value >= 45 and err.max() <= 24 / 255 and (err > 1 / 255).sum() <= 3000) if parity
+          else (err.max() <= 2 / 255 and not np.any(err > 1 / 255)))
     if not ok:
         where = save_failure(f"pvsm_{'parity' if parity else 'exact'}", got, want)
         pytest.fail(f"{value:.1f} dB, max {err.max() * 255:.2f}/255, {int((err > 1 / 255).sum())} pixels > 1/255 "
@@ -368,25 +371,27 @@ def test_cli_renders_a_state(tmp_path):
 def test_parity_against_vtks_projected_tetra():
     """The stand-in for ParaView's own image: VTK's vtkProjectedTetrahedraMapper (what
     ParaView's "Projected tetra" runs) with the state's camera and maps, against tetvr's
-    parity picture. Measured 55.3 dB in a parallel view, 49.5 dB in the state's perspective
-    one (VTK's perspective thickness table, docs/paraview.md); bars 50 and 45 dB."""
+    parity picture, in the state's perspective view and in a parallel one. Measured 80.1
+    and 80.3 dB, max 1/255 (on ~55 pixels); bar 55 dB and no pixel beyond 1/255."""
     from tetvr.vtkcompare import VTKProcess, quantize8, vtk_status
 
     ok, why = vtk_status()
     if not ok:
         pytest.fail(f"VTK is installed but cannot render here: {why}")
     scene = load_state(STATE, data_directory=MESHES, size=(200, 150), parity=True)
-    cams = {"perspective": (scene.camera, 45.0),
-            "parallel": (dataclasses.replace(scene.camera, parallel_projection=True), 50.0)}
+    cams = {"perspective": scene.camera,
+            "parallel": dataclasses.replace(scene.camera, parallel_projection=True)}
     with VTKProcess(scene.mesh, scene.tf, mapper="pt", size=scene.size) as vtk:
-        for name, (cam, bar) in cams.items():
+        for name, cam in cams.items():
             want = vtk.render(cam)
             got = quantize8(tetvr.render(scene.mesh, camera=cam, tf=scene.tf, size=scene.size,
                                          settings=scene.settings))
             value = psnr(got, want)
-            if value < bar:
+            err = np.abs(got.astype(np.float64) - want).max(axis=-1) * 255
+            if value < 55.0 or err.max() > 1.5:
                 where = save_failure(f"pvsm_vtk_{name}", got, want)
-                pytest.fail(f"{name}: {value:.1f} dB < {bar} dB against VTK's projected tetra (images in {where})")
+                pytest.fail(f"{name}: {value:.1f} dB, max {err.max():.1f}/255 against VTK's projected tetra "
+                            f"(images in {where})")
 
 
 _PVBATCH = shutil.which("pvbatch") or shutil.which("pvpython")

@@ -34,6 +34,7 @@ scalar, and the scalar is linear along a ray inside a tetrahedron, so on such a 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,6 +48,7 @@ __all__ = [
     "OPTICS",
     "integrate_linear_pieces",
     "vtk_segments",
+    "vtk_vertex_rgba8",
 ]
 
 #: Conventions from transfer-function opacity to light transport (``RenderSettings.optics``):
@@ -237,6 +239,35 @@ def vtk_segments(
     a1 = np.clip(np.asarray(a1, dtype=np.float64), 0.0, 1.0)
     theta = np.asarray(length, dtype=np.float64) * (a0 + a1) / (2.0 * float(unit_distance))
     return 0.5 * (c0 + c1) * (-np.expm1(-theta))[:, None], theta
+
+
+def vtk_vertex_rgba8(tf: Any, scalars: NDArray[np.floating[Any]]) -> NDArray[np.uint8]:
+    """Colour and opacity at the vertices as VTK's projected tetrahedra store them.
+
+    ``vtkProjectedTetrahedraMapper::MapScalarsToColors`` evaluates the colour and opacity
+    functions at every point's scalar and keeps 8 bits by truncation,
+    ``(unsigned char)(v * 255.9999)``; the parity renderer (optics ``"vtk"``) interpolates
+    these, as VTK does, rather than the scalar.
+
+    Parameters
+    ----------
+    tf : a :class:`tetvr.TransferFunction`.
+    scalars : (n,) point (or cell) values.
+
+    Returns
+    -------
+    (n, 4) uint8 RGBA.
+
+    Examples
+    --------
+    >>> from tetvr import TransferFunction
+    >>> tf = TransferFunction(color=((0, 0, 0, 0), (1, 1, 1, 1)), opacity=((0, 0.0), (1, 1.0)))
+    >>> vtk_vertex_rgba8(tf, np.array([0.5, 1.0])).tolist()
+    [[127, 127, 127, 127], [255, 255, 255, 255]]
+    """
+    rgb, opacity = tf.evaluate(np.asarray(scalars, dtype=np.float64))
+    rgba = np.concatenate([rgb, opacity[:, None]], axis=1)
+    return (np.clip(rgba, 0.0, 1.0) * 255.9999).astype(np.uint8)
 
 
 def _integrate_smooth(

@@ -32,6 +32,7 @@ from .context import create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
 from ..method import choose
 from .raymarch import Marcher, raymarch_capacity
+from .vtkpt import VTKParity
 from .util import (Clock, GLOwner, check_size, clear_gl_errors, gl_locked, locked, make_target, set_uniforms,
                    table_texture)
 
@@ -133,6 +134,7 @@ class Renderer(GLOwner):
         self._fans: Any = None
         self._order: Any = None
         self._marcher: Marcher | None = None  # the tet-marching ray caster's GL state, made on first use
+        self._parity: VTKParity | None = None  # VTK parity's GL state (optics="vtk"), made on first use
         self._exact_count: Any = None  # classify.comp's count of fans on the exact path
         self._fan_indices: Any = None  # index buffer of fan patterns (_reserve_fans), made on first draw
         self._table: PreintegrationTable | None = None  # the table in the texture
@@ -155,11 +157,15 @@ class Renderer(GLOwner):
         self._table = self._table_cache = None
         if self._marcher is not None:
             self._marcher.forget()
+        if self._parity is not None:
+            self._parity.forget()
 
     def _gl_objects(self) -> list[Any]:
         objs = [*self._vaos.values(), *self._programs.values(), *self._mesh_buffers]
         if self._marcher is not None:
             objs += self._marcher.gl_objects()
+        if self._parity is not None:
+            objs += self._parity.gl_objects()
         objs += [o for o in (self._fans, self._order, self._table_tex, self._fan_indices, self._exact_count)
                  if o is not None]
         for fbo in self._targets.values():
@@ -176,6 +182,8 @@ class Renderer(GLOwner):
             total += size[0] * size[1] * components * (4 if dtype == "f4" else 1)
         if self._marcher is not None:
             total += self._marcher.gpu_bytes()
+        if self._parity is not None:
+            total += self._parity.gpu_bytes()
         return int(total)
 
     # ---- programs ----
@@ -187,6 +195,9 @@ class Renderer(GLOwner):
             return prog
         programs = {"classify": {"compute_shader": "classify.comp"},
                     "tet": {"vertex_shader": "tet.vert", "fragment_shader": "tet.frag"},
+                    # VTK parity (optics="vtk", tetvr.gl.vtkpt): VTK's projected tetrahedra.
+                    "classify_vtk": {"compute_shader": "classify_vtk.comp"},
+                    "vtk_pt": {"vertex_shader": "vtk_pt.vert", "fragment_shader": "vtk_pt.frag"},
                     "floor": {"vertex_shader": "tet.vert", "fragment_shader": "floor.frag"},
                     "depth": {"vertex_shader": "tet.vert", "fragment_shader": "depth.frag"},
                     "march_entry": {"vertex_shader": "march_entry.vert", "fragment_shader": "march_entry.frag"},
@@ -341,13 +352,14 @@ class Renderer(GLOwner):
                     u_near=near, u_far=far, u_ray_scale=(1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1])))
 
     def _classify(self, n_tets: int, uniforms: dict[str, Any], *, perspective_correct: int,
-                  count_exact: bool = False) -> int:
-        """Run classify.comp over the first ``n_tets`` drawing positions of the order
-        buffer: it writes their fans' vertices in drawing order. With ``count_exact``,
-        return how many fans take the exact per-fragment path (a 4-byte read that waits for
-        the classification), else 1. ``uniforms`` holds the view's and, for the render, the
-        table's (the vertices carry table coordinates)."""
-        classify = self._program("classify", PERSPECTIVE_CORRECT=perspective_correct)
+                  count_exact: bool = False, program: Any = None) -> int:
+        """Run classify.comp (or ``program``, which writes the same fans) over the first
+        ``n_tets`` drawing positions of the order buffer: it writes their fans' vertices in
+        drawing order. With ``count_exact``, return how many fans take the exact
+        per-fragment path (a 4-byte read that waits for the classification), else 1.
+        ``uniforms`` holds the view's and, for the render, the table's (the vertices carry
+        table coordinates)."""
+        classify = program or self._program("classify", PERSPECTIVE_CORRECT=perspective_correct)
         set_uniforms(classify, u_count=n_tets, **uniforms)
         if self._exact_count is None:
             self._exact_count = self.ctx.buffer(reserve=4)
@@ -462,32 +474,15 @@ class Renderer(GLOwner):
         size = self._check(size)
         check_float32_range(mesh, tf)
         check_view_precision(mesh, camera, size)
+        if shader == "tet" and self.settings.optics == "vtk":
+            return self._render_vtk(mesh, camera, tf, size, order)
         table = self.table(mesh, tf)
         self._use_table(table)
         self._clock.lap("table")
         if shader == "tet" and order is None and self._uses_raymarch(mesh, camera, size):
             return self._raymarch(mesh, camera, table, size)
         uniforms = self._view_uniforms(mesh, camera, size)
-        cycle_breaks = n_culled = 0
-        if order is None:
-            order_ids, sort_stats = sort_with_stats(mesh, camera, self.settings.sort)
-            cycle_breaks = sort_stats.n_cycle_breaks
-            if self.settings.cull:
-                # Sort everything, then filter: MPVONC constraints through culled cells hold.
-                keep, _ = visible_cells(mesh, camera, tf, size=size,
-                                        scalar_margin=gpu_scalar_margin(mesh, tf, node_spacing=table.node_spacing))
-                mask = np.zeros(mesh.n_tets, dtype=bool)
-                mask[keep] = True
-                order_ids = order_ids[mask[order_ids]]
-                n_culled = mesh.n_tets - int(order_ids.shape[0])
-        else:
-            order_ids = np.asarray(order)
-            if order_ids.ndim != 1 or order_ids.shape[0] > mesh.n_tets or order_ids.dtype.kind not in "iu":
-                raise ValueError(f"order must be at most {mesh.n_tets} integer cell ids, got {order_ids.dtype} "
-                                 f"of shape {order_ids.shape}")
-            if order_ids.size and (order_ids.min() < 0 or order_ids.max() >= mesh.n_tets
-                                   or np.bincount(order_ids, minlength=mesh.n_tets).max() != 1):
-                raise ValueError(f"order must list cell ids in 0..{mesh.n_tets - 1}, each at most once")
+        order_ids, cycle_breaks, n_culled = self._drawing_order(mesh, camera, tf, size, order, table)
         self._clock.lap("sort")
 
         defines = dict(PERSPECTIVE_CORRECT=int(self.settings.perspective_correct),
@@ -513,6 +508,49 @@ class Renderer(GLOwner):
                                      perspective_correct=defines["PERSPECTIVE_CORRECT"], count_exact=True)
             self._draw(progs[n_exact > 0], fbo, n, ((moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA), moderngl.FUNC_ADD))
         image = self._read(fbo, size, 4, fb_dtype)
+        self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, cycle_breaks=cycle_breaks, n_culled=n_culled,
+                                     **self._clock.laps)
+        return image
+
+    def _drawing_order(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, size: tuple[int, int],
+                       order: NDArray[np.integer[Any]] | None, table: PreintegrationTable | None
+                       ) -> tuple[NDArray[Any], int, int]:
+        """The cells to draw, back to front: the sort (less the culled cells with
+        ``settings.cull``, which sizes its margin from ``table``) or the caller's order,
+        checked. Also returns the sort's cycle breaks and the number of culled cells."""
+        cycle_breaks = n_culled = 0
+        if order is None:
+            order_ids, sort_stats = sort_with_stats(mesh, camera, self.settings.sort)
+            cycle_breaks = sort_stats.n_cycle_breaks
+            if self.settings.cull:
+                # Sort everything, then filter: MPVONC constraints through culled cells hold.
+                spacing = (table or self.table(mesh, tf)).node_spacing
+                keep, _ = visible_cells(mesh, camera, tf, size=size,
+                                        scalar_margin=gpu_scalar_margin(mesh, tf, node_spacing=spacing))
+                mask = np.zeros(mesh.n_tets, dtype=bool)
+                mask[keep] = True
+                order_ids = order_ids[mask[order_ids]]
+                n_culled = mesh.n_tets - int(order_ids.shape[0])
+        else:
+            order_ids = np.asarray(order)
+            if order_ids.ndim != 1 or order_ids.shape[0] > mesh.n_tets or order_ids.dtype.kind not in "iu":
+                raise ValueError(f"order must be at most {mesh.n_tets} integer cell ids, got {order_ids.dtype} "
+                                 f"of shape {order_ids.shape}")
+            if order_ids.size and (order_ids.min() < 0 or order_ids.max() >= mesh.n_tets
+                                   or np.bincount(order_ids, minlength=mesh.n_tets).max() != 1):
+                raise ValueError(f"order must list cell ids in 0..{mesh.n_tets - 1}, each at most once")
+        return order_ids, cycle_breaks, n_culled
+
+    def _render_vtk(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, size: tuple[int, int],
+                    order: NDArray[np.integer[Any]] | None) -> NDArray[np.float32]:
+        """One frame in VTK parity (``optics="vtk"``): VTK's projected tetrahedra step for
+        step (:mod:`tetvr.gl.vtkpt`), without the table."""
+        uniforms = self._view_uniforms(mesh, camera, size)
+        order_ids, cycle_breaks, n_culled = self._drawing_order(mesh, camera, tf, size, order, None)
+        self._clock.lap("sort")
+        if self._parity is None:
+            self._parity = VTKParity(self)
+        image = self._parity.render(mesh, tf, size, uniforms, order_ids)
         self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, cycle_breaks=cycle_breaks, n_culled=n_culled,
                                      **self._clock.laps)
         return image

@@ -1,0 +1,114 @@
+"""VTK parity on the GPU (``RenderSettings(optics="vtk")``): ParaView's "Projected tetra".
+
+About this technique
+--------------------
+VTK's ``vtkOpenGLProjectedTetrahedraMapper`` is Shirley & Tuchman's (1990) projected
+tetrahedra with Wylie et al.'s (2002) thick vertex found where two opposite edges cross in
+projection. Parity mode exists to show ParaView's picture, defects included, so it takes
+VTK's steps rather than tetvr's own (docs/paraview.md, "What VTK's Projected tetra
+computes"): colour and opacity classified at the vertices and kept in 8 bits by
+truncation (:func:`tetvr.optics.vtk_vertex_rgba8`), the thick vertex's values averaged
+(and truncated again), the class-2 opacity taken with the wrong edge parameter, the
+thickness in perspective views read from a 2,048-entry square-root table, everything
+interpolated linearly in screen space, and ``alpha = 1 - exp(-a d / u)`` per fragment
+(``shaders/classify_vtk.comp``, ``vtk_pt.vert``, ``vtk_pt.frag``). The drawing order is
+VTK's too: cell centroids by their depth along the direction of projection
+(``vtkCellCenterDepthSort``, :func:`vtk_depth_order`). Nothing here is used by the other
+optics; the pre-integration table is not built.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..camera import Camera
+from ..mesh import TetMesh
+from ..optics import vtk_vertex_rgba8
+from ..transfer import TransferFunction
+
+if TYPE_CHECKING:
+    from .renderer import Renderer
+
+__all__ = ["VTKParity", "vtk_depth_order", "SQRT_TABLE_SIZE"]
+
+#: Entries of VTK's square-root table for the thickness in perspective views.
+SQRT_TABLE_SIZE = 2048
+
+
+def vtk_depth_order(mesh: TetMesh, camera: Camera) -> NDArray[np.uint32]:
+    """Cell ids back to front as ``vtkCellCenterDepthSort`` orders them.
+
+    VTK sorts cell centres by their dot product with ``position - focal_point`` (in
+    float), for perspective views too, where tetvr's centroid sort takes the distance to
+    the eye. Ties, which VTK leaves to a random-pivot quicksort, keep the cell order here.
+    """
+    vector = (np.asarray(camera.position) - np.asarray(camera.focal_point)).astype(np.float32)
+    depth = mesh.centroids.astype(np.float32) @ vector
+    return np.argsort(depth, kind="stable").astype(np.uint32)
+
+
+class VTKParity:
+    """The parity renderer's GL state for one :class:`~tetvr.gl.renderer.Renderer`: the
+    vertices' 8-bit colours, uploaded once per mesh and transfer function."""
+
+    def __init__(self, owner: "Renderer") -> None:
+        self.owner = owner
+        self._colors: tuple[TetMesh, TransferFunction, Any] | None = None
+
+    def forget(self) -> None:
+        self._colors = None
+
+    def gl_objects(self) -> list[Any]:
+        return [] if self._colors is None else [self._colors[2]]
+
+    def gpu_bytes(self) -> int:
+        return 0 if self._colors is None else int(self._colors[2].size)
+
+    def _use_colors(self, mesh: TetMesh, tf: TransferFunction) -> Any:
+        """The packed RGBA8 of every point of the renderer's points buffer (cell data: each
+        tet's four points carry its cell's colour, as VTK colours the cell)."""
+        if self._colors is not None and self._colors[0] is mesh and self._colors[1] == tf:
+            return self._colors[2]
+        if self._colors is not None:
+            self._colors[2].release()
+            self._colors = None
+        values = mesh.scalars if mesh.cell_scalars is None else np.repeat(mesh.cell_scalars, 4)
+        rgba = vtk_vertex_rgba8(tf, values).astype(np.uint32)
+        packed = rgba[:, 0] | (rgba[:, 1] << 8) | (rgba[:, 2] << 16) | (rgba[:, 3] << 24)
+        buffer = self.owner.ctx.buffer(np.ascontiguousarray(packed, dtype=np.uint32).tobytes())
+        self._colors = (mesh, tf, buffer)
+        return buffer
+
+    def render(self, mesh: TetMesh, tf: TransferFunction, size: tuple[int, int], uniforms: dict[str, Any],
+               order_ids: NDArray[Any]) -> NDArray[np.float32]:
+        """One frame: premultiplied RGBA, (height, width, 4), row 0 at the top. ``uniforms``
+        are the renderer's view uniforms (the mesh uploaded), ``order_ids`` the drawing order."""
+        import moderngl
+
+        owner = self.owner
+        colors = self._use_colors(mesh, tf)
+        proj32 = np.asarray(uniforms["u_proj"], dtype=np.float32)
+        inv_proj = np.linalg.inv(proj32.astype(np.float64))  # VTK inverts its float matrix in double
+        # VTK's test for a parallel projection: then NDC depth is linear in eye depth and the
+        # thickness exact, (far - near) / 2 per unit; in perspective it reads the table.
+        parallel = bool(np.all(proj32[3, :3] == 0.0) and proj32[3, 3] == 1.0)
+        max_edge2 = float(np.float32(mesh.max_edge ** 2))
+        vtk_uniforms = dict(uniforms, u_inv_proj=inv_proj,
+                            u_linear_depth=float(np.linalg.norm(inv_proj[:3, 2])) if parallel else 0.0,
+                            u_sqrt_bias=(SQRT_TABLE_SIZE - 1) / max(max_edge2, 1e-30),
+                            u_unit_distance=float(tf.unit_distance))
+        classify = owner._program("classify_vtk")
+        prog = owner._program("vtk_pt")
+        fb_dtype = "f4" if owner.settings.framebuffer == "float32" else "f1"
+        fbo = owner._use_target(size, 4, fb_dtype)
+        fbo.use()
+        fbo.clear(0.0, 0.0, 0.0, 0.0)
+        owner._clock.lap("setup")
+        for n in owner._chunks(mesh, order_ids):
+            colors.bind_to_storage_buffer(5)
+            owner._classify(n, vtk_uniforms, perspective_correct=0, program=classify)
+            owner._draw(prog, fbo, n, ((moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA), moderngl.FUNC_ADD))
+        return owner._read(fbo, size, 4, fb_dtype)
