@@ -19,7 +19,7 @@ void main() {
     float zf, zb;
     if (v_exact_tet >= 0) {
         // Tets on the exact path (near-plane tets among them): the ray's own segment.
-        vec4 seg = exact_ray_segment(v_exact_tet, v_ray);
+        vec4 seg = exact_ray_segment(v_exact_tet, v_ray, u_near, u_far);
         if (seg.y <= seg.x) discard;
         zf = seg.x;
         zb = seg.y;

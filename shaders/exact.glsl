@@ -6,10 +6,11 @@
 // u_far) and the PERSPECTIVE define.
 // In:  the tet id, the pixel's ray (tet.vert's v_ray: eye x, y per unit depth in
 //      perspective, eye x, y in parallel projection).
-// Out: (t0, t1, s0, s1): the eye depths where the ray enters and leaves the tet, clipped to
-//      the clipping range, and the scalars there; t1 <= t0 where the ray misses it.
+// Out: (t0, t1, s0, s1): the eye depths where the ray enters and leaves the tet, cut to
+//      the window (near, far) (the clipping range, or window.glsl's ray_window), and the
+//      scalars there; t1 <= t0 where the ray misses it.
 
-vec4 exact_ray_segment(int tet, vec2 ray) {
+vec4 exact_ray_segment(int tet, vec2 ray, float near, float far) {
     ivec4 id = mesh_tet(tet);
     vec3 p[4];
     float s[4];
@@ -23,7 +24,7 @@ vec4 exact_ray_segment(int tet, vec2 ray) {
 #else
     vec3 o = vec3(ray, 0.0), d = vec3(0.0, 0.0, -1.0);
 #endif
-    float t0 = u_near, t1 = u_far;
+    float t0 = near, t1 = far;
     for (int k = 0; k < 4; ++k) {
         vec3 a = p[(k + 1) & 3], b = p[(k + 2) & 3], c = p[(k + 3) & 3];
         vec3 n = cross(b - a, c - a);

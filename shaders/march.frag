@@ -17,9 +17,14 @@
 // by whose plane the ray points out of; the scalar is carried from face to face (it is
 // continuous: point data is linear in each tet; cell data is read per tet), so each step reads three planes, the
 // scalar record and the mates.
+// With clip planes or a ray limit (window.glsl: CLIP_PLANES, RAY_LIMIT) the walk still
+// starts at the entry, but only each segment's part inside the pixel's window is
+// composited (its scalars from the tet's linear field at the cut), and it stops at the
+// window's far end.
 
 #include "march_common.glsl"
 #include "lookup.glsl"
+#include "window.glsl"
 
 uniform sampler2D u_entry_depth;
 uniform isampler2D u_entry;
@@ -64,6 +69,13 @@ void main() {
     int entry = texelFetch(u_entry, px, 0).r;
     f_last = entry;
 
+#if RAY_WINDOW
+    vec2 win = ray_window((gl_FragCoord.xy / u_viewport * 2.0 - 1.0) * u_ray_scale, px, u_near, u_far);
+    if (win.y <= win.x) return;  // nothing of this ray is kept
+    float far = win.y;
+#else
+    float far = u_far;
+#endif
     vec3 o, d;
     pixel_ray(gl_FragCoord.xy, o, d);
     float per_t = length(d);  // world length per unit of t
@@ -95,7 +107,7 @@ void main() {
     }
     vec4 g = tet_scalar(tet);
     float s_in = dot(g.xyz, o + t_in * d) + g.w;
-#if EXTENT
+#if EXTENT && !RAY_WINDOW
     acc.x = min(acc.x, t_in);
 #endif
     float status = STATUS_DONE;
@@ -114,15 +126,27 @@ void main() {
         }
         if (exit_face < 0) break;  // no face ahead: only rounding on a degenerate ray does this
         t_out = max(t_exit, t_in);
-        bool at_far = t_out >= u_far;
-        if (at_far) t_out = u_far;
+        bool at_far = t_out >= far;
+        if (at_far) t_out = far;
         float s_out = dot(g.xyz, o + t_out * d) + g.w;
+#if RAY_WINDOW
+        // The part of the segment in front of the window's near end is not composited.
+        float t_a = max(t_in, win.x);
+        bool shown = t_out > t_a;
+        float s_a = t_a > t_in ? dot(g.xyz, o + t_a * d) + g.w : s_in;
+#else
+        float t_a = t_in, s_a = s_in;
+        const bool shown = true;
+#endif
 #if EXTENT
-        acc.y = max(acc.y, t_out);
+        if (shown) {
+            acc.x = min(acc.x, t_a);
+            acc.y = max(acc.y, t_out);
+        }
         acc.z += 1.0;
         if (at_far) break;
 #else
-        acc += (1.0 - acc.a) * lookup_segment(s_in, s_out, (t_out - t_in) * per_t);
+        if (shown) acc += (1.0 - acc.a) * lookup_segment(s_a, s_out, (t_out - t_a) * per_t);
         if (at_far || acc.a >= u_opaque) break;
 #endif
         int mate = tet_mates(tet)[exit_face];

@@ -6,14 +6,17 @@
 // In:  v_segment, v_ray, v_exact_tet (see tet.vert); u_near, u_far.
 // Out: f_color, premultiplied.
 // The segment is clipped to the near and far planes here, per fragment, so tets that
-// cross them are cut rather than dropped. Defines (one program per combination):
+// cross them are cut rather than dropped; with clip planes or a ray limit (window.glsl)
+// to the pixel's window instead. Defines (one program per combination):
 // PERSPECTIVE, PERSPECTIVE_CORRECT, CLIP_RANGE (some point lies outside the clipping
-// range), NEAR_CROSSING (some point lies before the near plane). llvmpipe pays for a
-// runtime branch even when no fragment takes it, so view-wide cases are compiled in.
+// range, or a window is given), NEAR_CROSSING (some point lies before the near plane),
+// CLIP_PLANES, RAY_LIMIT (window.glsl). llvmpipe pays for a runtime branch even when no
+// fragment takes it, so view-wide cases are compiled in.
 
 #include "common.glsl"
 #include "lookup.glsl"
 #include "exact.glsl"
+#include "window.glsl"
 
 noperspective in vec4 v_segment;
 noperspective in vec2 v_ray;  // eye-space x/depth, y/depth of the pixel's ray in perspective,
@@ -24,8 +27,8 @@ flat in float v_chord;  // the longest segment the tet holds (its longest edge)
 out vec4 f_color;
 
 // The ray of this pixel through one tet, exactly (exact.glsl).
-void exact_segment(int tet) {
-    vec4 seg = exact_ray_segment(tet, v_ray);  // (t0, t1, sf, sb)
+void exact_segment(int tet, vec2 win) {
+    vec4 seg = exact_ray_segment(tet, v_ray, win.x, win.y);  // (t0, t1, sf, sb)
     if (seg.y <= seg.x) discard;
 #if PERSPECTIVE
     float per_depth = length(vec3(v_ray, 1.0));
@@ -36,11 +39,17 @@ void exact_segment(int tet) {
 }
 
 void main() {
+#if RAY_WINDOW
+    vec2 win = ray_window(v_ray, ivec2(gl_FragCoord.xy), u_near, u_far);
+    if (win.y <= win.x) discard;
+#else
+    vec2 win = vec2(u_near, u_far);
+#endif
 #if NEAR_CROSSING
     // Compiled in only for views where some point lies before the near plane: the
     // extra code halves the speed of llvmpipe's fragment stage even when not taken.
     if (v_exact_tet >= 0) {
-        exact_segment(v_exact_tet);
+        exact_segment(v_exact_tet, win);
         return;
     }
 #endif
@@ -57,15 +66,16 @@ void main() {
     const float per_depth = 1.0;
 #endif
 #if CLIP_RANGE
-    // Compiled in only for views where some point lies outside the clipping range.
-    if (zb <= u_near || zf >= u_far) discard;
-    if (zf < u_near) {
-        sf = mix(sf, sb, (u_near - zf) / (zb - zf));
-        zf = u_near;
+    // Compiled in only for views where some point lies outside the clipping range, or
+    // with a window (window.glsl).
+    if (zb <= win.x || zf >= win.y) discard;
+    if (zf < win.x) {
+        sf = mix(sf, sb, (win.x - zf) / (zb - zf));
+        zf = win.x;
     }
-    if (zb > u_far) {
-        sb = mix(sf, sb, (u_far - zf) / (zb - zf));
-        zb = u_far;
+    if (zb > win.y) {
+        sb = mix(sf, sb, (win.y - zf) / (zb - zf));
+        zb = win.y;
     }
 #endif
     // Rounding can order a flat segment's ends the wrong way: its length is 0, not negative.

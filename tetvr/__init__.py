@@ -9,11 +9,13 @@ renderer is made. :func:`plot` renders and labels a picture in one call (:mod:`~
 
 from .annotate import Picture, plot, show
 from .camera import Camera
+from .clip import Clip
 from .image import psnr, rmse, write_png
 from .mesh import MeshReport, TetMesh, read
 from .render import render
 from .scene import Scene, demo_scene_path, load_scene
 from .settings import RenderSettings
+from .surface import Surface
 from .transfer import PRESETS, TransferFunction
 from .volume import Volume, read_volume
 from .raycast_reference import RaycastSettings
@@ -23,6 +25,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Camera",
+    "Clip",
     "Picture",
     "MeshReport",
     "PRESETS",
@@ -38,6 +41,7 @@ __all__ = [
     "fuse",
     "read_volume",
     "Scene",
+    "Surface",
     "demo_scene_path",
     "load_scene",
     "plot",

@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Callable, Iterator, NamedTuple
+from typing import Callable, Iterator, NamedTuple, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -60,10 +60,12 @@ from numpy.typing import NDArray
 from ._checks import check_instances
 from .adjacency import FACE_VERTICES
 from .camera import Camera
+from .clip import Clip, ray_window
 from .image import check_memory, image_size
 from .mesh import TetMesh
 from .optics import _SUB_THETA, OPTICS, integrate_linear_pieces, integrate_pieces, piece_optical_depth, vtk_segments
 from .preintegrate import check_unit_distance
+from .surface import Surface, check_surfaces, surface_hits
 from .transfer import TransferFunction
 
 __all__ = [
@@ -137,6 +139,10 @@ class _EyeRays:
     ky: float
     near: float
     far: float
+    # Per pixel (row-major) window of eye depth, or None: the clipping range cut by clip
+    # planes and surfaces (tetvr.clip, tetvr.surface).
+    lo: Float | None = None
+    hi: Float | None = None
 
     @classmethod
     def from_camera(cls, camera: Camera, width: int, height: int) -> "_EyeRays":
@@ -342,6 +348,11 @@ def _clip_chunk(geo: _TetGeometry, rays: _EyeRays, tets: Int, counts: Int, box_w
     np.maximum(t_in, enter[:, 3], out=t_in)
     t_out = np.minimum(np.minimum(leave[:, 0], leave[:, 1]), np.minimum(leave[:, 2], rays.far))
     np.minimum(t_out, leave[:, 3], out=t_out)
+    if rays.lo is not None and rays.hi is not None:
+        pixel = row * rays.width + col
+        np.maximum(t_in, rays.lo[pixel], out=t_in)
+        np.minimum(t_out, rays.hi[pixel], out=t_out)
+        del pixel
     keep = (t_out > t_in) & ~(outside[:, 0] | outside[:, 1] | outside[:, 2] | outside[:, 3])
     del enter, leave, outside
 
@@ -605,6 +616,8 @@ def render_reference(
     chunk: int = DEFAULT_CHUNK,
     progress: bool = False,
     optics: str = "exact",
+    clip: Clip | None = None,
+    surfaces: Surface | Sequence[Surface] = (),
 ) -> NDArray[np.float32]:
     """Render the mesh exactly on the CPU.
 
@@ -621,6 +634,10 @@ def render_reference(
     optics : the opacity convention, as ``RenderSettings.optics``: "exact" (default),
         "linear" (``tau = a/u``) or "vtk" (VTK's projected-tetrahedra segment formula,
         on exact geometry); see :func:`integrate_segments`.
+    clip : keep only this part of the mesh (:class:`tetvr.Clip`): every segment is cut to
+        the part of its ray the clip keeps.
+    surfaces : opaque surfaces (:class:`tetvr.Surface`): every ray ends at its nearest
+        hit (:func:`tetvr.surface.surface_hits`), whose shaded colour is composited behind.
 
     Returns
     -------
@@ -646,7 +663,21 @@ def render_reference(
     check_unit_distance(tf.unit_distance, "the transfer function's unit_distance")
     # Up front, not at the first allocation: a 100000 x 100000 image needs 600 GiB.
     check_memory(width * height * _BYTES_PER_PIXEL, f"a {width}x{height} reference image")
+    if clip is not None and not isinstance(clip, Clip):
+        raise TypeError(f"clip must be a tetvr.Clip or None, got {type(clip).__name__}")
+    surfaces = check_surfaces(surfaces)
     rays = _EyeRays.from_camera(camera, width, height)
+    hit_t = hit_rgb = None
+    if clip is not None or surfaces:
+        if clip is not None:
+            lo, hi = ray_window(clip.eye_planes(camera), rays.x_col[None, :], rays.y_row[:, None],
+                                parallel=rays.parallel, near=rays.near, far=rays.far)
+        else:
+            lo, hi = np.full((height, width), rays.near), np.full((height, width), rays.far)
+        if surfaces:
+            hit_t, hit_rgb = surface_hits(surfaces, camera, (width, height))
+            hi = np.minimum(hi, hit_t)
+        rays = dataclasses.replace(rays, lo=lo.reshape(-1), hi=hi.reshape(-1))
     norms = rays.norms()
     geo = _tet_geometry(mesh, camera, rays)
 
@@ -668,7 +699,12 @@ def render_reference(
         depths.append(theta)
     n_pixels = width * height
     if not pixels:
-        return np.zeros((height, width, 4), dtype=np.float32)
-    image = composite(np.concatenate(pixels), np.concatenate(fronts), np.concatenate(colours),
-                      np.concatenate(depths), n_pixels)
-    return image.reshape(height, width, 4).astype(np.float32)
+        image = np.zeros((height, width, 4))
+    else:
+        image = composite(np.concatenate(pixels), np.concatenate(fronts), np.concatenate(colours),
+                          np.concatenate(depths), n_pixels).reshape(height, width, 4)
+    if hit_t is not None and hit_rgb is not None:
+        hit = np.isfinite(hit_t)
+        behind = np.concatenate([hit_rgb, hit[..., None].astype(np.float64)], axis=-1)
+        image = image + (1.0 - image[..., 3:4]) * behind  # the tets over the surfaces
+    return image.astype(np.float32)

@@ -124,8 +124,13 @@ def render(
         ``settings.optics == "vtk"`` (VTK parity) its unit distance is ParaView's default.
     size : (width, height).
     settings : GPU method settings.
-    method : ``"gpu"`` (projected tetrahedra through OpenGL) or ``"reference"`` (the
-        exact CPU ray caster, :func:`tetvr.reference.render_reference`).
+    method : ``"gpu"`` (OpenGL; ``settings.method`` picks projected tetrahedra or tet
+        marching) or ``"reference"`` (the exact CPU ray caster,
+        :func:`tetvr.reference.render_reference`).
+    **kwargs : passed on to :meth:`tetvr.Renderer.render` or
+        :func:`tetvr.reference.render_reference`; both take ``clip`` (a :class:`tetvr.Clip`:
+        keep part of the mesh, cut exactly) and ``surfaces`` (a sequence of
+        :class:`tetvr.Surface`: opaque geometry that ends the rays it meets).
 
     Examples
     --------

@@ -182,9 +182,11 @@ class Marcher:
 
     # ---- the frame ----
     def render(self, mesh: TetMesh, camera: Camera, size: tuple[int, int], uniforms: dict[str, Any],
-               table_uniforms: dict[str, Any], defines: dict[str, int], clock: Any) -> NDArray[np.float32]:
-        """Premultiplied RGBA, (height, width, 4), row 0 at the top."""
-        return self._frame(mesh, camera, size, uniforms, table_uniforms, dict(defines, EXTENT=0), clock)
+               table_uniforms: dict[str, Any], defines: dict[str, int], clock: Any, window: Any = None
+               ) -> NDArray[np.float32]:
+        """Premultiplied RGBA, (height, width, 4), row 0 at the top; ``window`` a
+        :class:`~tetvr.gl.surfaces.RayWindow` (clip planes, ray limit) or None."""
+        return self._frame(mesh, camera, size, uniforms, table_uniforms, dict(defines, EXTENT=0), clock, window)
 
     def extent(self, mesh: TetMesh, camera: Camera, size: tuple[int, int], uniforms: dict[str, Any],
                clock: Any) -> NDArray[np.float32]:
@@ -194,7 +196,8 @@ class Marcher:
         return self._frame(mesh, camera, size, uniforms, {}, defines, clock)
 
     def _frame(self, mesh: TetMesh, camera: Camera, size: tuple[int, int], uniforms: dict[str, Any],
-               table_uniforms: dict[str, Any], defines: dict[str, int], clock: Any) -> NDArray[np.float32]:
+               table_uniforms: dict[str, Any], defines: dict[str, int], clock: Any, window: Any = None
+               ) -> NDArray[np.float32]:
         import moderngl
 
         ctx = self.ctx
@@ -236,7 +239,8 @@ class Marcher:
         ctx.disable(moderngl.DEPTH_TEST)
         clock.lap("entry")
 
-        march_defines = dict(defines, PERSPECTIVE=perspective, CELL_DATA=int(mesh.cell_data))
+        march_defines = dict(defines, PERSPECTIVE=perspective, CELL_DATA=int(mesh.cell_data),
+                             **(window.defines if window is not None else {}))
         samplers = dict(u_entry_depth=3, u_entry=4, u_color_in=5, u_state_in=6, u_last_in=7, u_state=5, u_last=7)
         steps = dict(u_max_steps=int(min(mesh.n_tets + 1, 1 << 30)), u_opaque=1.0 - OPAQUE_REMAINDER)
         src, dst = "b", "a"
@@ -244,6 +248,8 @@ class Marcher:
         for layer in range(MAX_LAYERS):
             march = self.owner._program("march", **march_defines, FIRST=int(layer == 0))
             self._set(march, {**common, **table_uniforms, **samplers, **steps})
+            if window is not None:
+                window.bind(march)
             t["depth"].use(3)
             t["entry"].use(4)
             t[f"color_{src}"].use(5)

@@ -13,12 +13,13 @@ read back. Tet marching (``method="raymarch"``, the default through ``"auto"``) 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..camera import Camera
+from ..clip import Clip
 from ..mesh import TetMesh
 from ..preintegrate import PreintegrationTable, table_for
 from ..tablesize import resolve as resolve_table_size, segment_sample
@@ -32,7 +33,9 @@ from .context import create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
 from ..method import choose
 from .raymarch import Marcher, raymarch_capacity
-from .vtkpt import VTKParity
+from .vtkpt import VTKParity, vtk_depth_order
+from .surfaces import RayWindow, SurfacePass
+from ..surface import Surface, check_surfaces
 from .util import (Clock, GLOwner, check_size, clear_gl_errors, gl_locked, locked, make_target, set_uniforms,
                    table_texture)
 
@@ -135,6 +138,7 @@ class Renderer(GLOwner):
         self._order: Any = None
         self._marcher: Marcher | None = None  # the tet-marching ray caster's GL state, made on first use
         self._parity: VTKParity | None = None  # VTK parity's GL state (optics="vtk"), made on first use
+        self._surfaces: SurfacePass | None = None  # the opaque surfaces' GL state, made on first use
         self._exact_count: Any = None  # classify.comp's count of fans on the exact path
         self._fan_indices: Any = None  # index buffer of fan patterns (_reserve_fans), made on first draw
         self._table: PreintegrationTable | None = None  # the table in the texture
@@ -159,6 +163,8 @@ class Renderer(GLOwner):
             self._marcher.forget()
         if self._parity is not None:
             self._parity.forget()
+        if self._surfaces is not None:
+            self._surfaces.forget()
 
     def _gl_objects(self) -> list[Any]:
         objs = [*self._vaos.values(), *self._programs.values(), *self._mesh_buffers]
@@ -166,6 +172,8 @@ class Renderer(GLOwner):
             objs += self._marcher.gl_objects()
         if self._parity is not None:
             objs += self._parity.gl_objects()
+        if self._surfaces is not None:
+            objs += self._surfaces.gl_objects()
         objs += [o for o in (self._fans, self._order, self._table_tex, self._fan_indices, self._exact_count)
                  if o is not None]
         for fbo in self._targets.values():
@@ -184,6 +192,8 @@ class Renderer(GLOwner):
             total += self._marcher.gpu_bytes()
         if self._parity is not None:
             total += self._parity.gpu_bytes()
+        if self._surfaces is not None:
+            total += self._surfaces.gpu_bytes()
         return int(total)
 
     # ---- programs ----
@@ -201,7 +211,8 @@ class Renderer(GLOwner):
                     "floor": {"vertex_shader": "tet.vert", "fragment_shader": "floor.frag"},
                     "depth": {"vertex_shader": "tet.vert", "fragment_shader": "depth.frag"},
                     "march_entry": {"vertex_shader": "march_entry.vert", "fragment_shader": "march_entry.frag"},
-                    "march": {"vertex_shader": "raycast.vert", "fragment_shader": "march.frag"}}
+                    "march": {"vertex_shader": "raycast.vert", "fragment_shader": "march.frag"},
+                    "surface": {"vertex_shader": "surface.vert", "fragment_shader": "surface.frag"}}
         if kind not in programs:
             raise ValueError(f"unknown shader {kind!r}; choose one of {sorted(programs)}")
         stages = programs[kind]
@@ -449,7 +460,8 @@ class Renderer(GLOwner):
 
     @gl_locked
     def render(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, *, size: tuple[int, int] = (512, 512),
-               order: NDArray[np.integer[Any]] | None = None, shader: str = "tet") -> NDArray[np.float32]:
+               order: NDArray[np.integer[Any]] | None = None, shader: str = "tet", clip: Clip | None = None,
+               surfaces: Surface | tuple[Surface, ...] | list[Surface] = ()) -> NDArray[np.float32]:
         """Render one frame.
 
         Parameters
@@ -459,19 +471,39 @@ class Renderer(GLOwner):
         order : an explicit drawing order (cell ids, back to front) instead of the sort;
             it may leave cells out (they are not drawn).
         shader : "tet" (the real thing) or "floor" (constant colour; fill-rate floor).
+        clip : keep only this part of the mesh (:class:`tetvr.Clip`), cut exactly per pixel.
+        surfaces : opaque surfaces (:class:`tetvr.Surface`) that end the rays they meet,
+            composited behind the tets in front of them.
 
         Returns
         -------
         (height, width, 4) float32 premultiplied RGBA, row 0 at the top.
         """
         self._check_alive()
-        return self._render(mesh, camera, tf, size, order, shader)
+        if clip is not None and not isinstance(clip, Clip):
+            raise TypeError(f"clip must be a tetvr.Clip or None, got {type(clip).__name__}")
+        surfaces = check_surfaces(surfaces)
+        if (clip is not None or surfaces) and shader != "tet":
+            raise ValueError(f"clip and surfaces need shader='tet', got {shader!r}")
+        size = self._check(size)
+        window = RayWindow.make(clip, camera)
+        if surfaces:
+            if self._surfaces is None:
+                self._surfaces = SurfacePass(self)
+            _, limit = self._surfaces.draw(surfaces, camera, size, mesh.float32_origin)
+            window = dataclasses.replace(window, limit=limit)
+        image = self._render(mesh, camera, tf, size, order, shader, window)
+        if surfaces:
+            assert self._surfaces is not None
+            behind = self._surfaces.read_color(size)
+            image += (1.0 - image[..., 3:4]) * behind  # the tets over the surfaces
+        return image
 
     def _render(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, size: tuple[int, int],
-                order: NDArray[np.integer[Any]] | None, shader: str) -> NDArray[np.float32]:
+                order: NDArray[np.integer[Any]] | None, shader: str, window: RayWindow = RayWindow()
+                ) -> NDArray[np.float32]:
         import moderngl
 
-        size = self._check(size)
         check_float32_range(mesh, tf)
         check_view_precision(mesh, camera, size)
         if shader == "tet" and self.settings.optics == "vtk":
@@ -480,7 +512,7 @@ class Renderer(GLOwner):
         self._use_table(table)
         self._clock.lap("table")
         if shader == "tet" and order is None and self._uses_raymarch(mesh, camera, size):
-            return self._raymarch(mesh, camera, table, size)
+            return self._raymarch(mesh, camera, table, size, window)
         uniforms = self._view_uniforms(mesh, camera, size)
         order_ids, cycle_breaks, n_culled = self._drawing_order(mesh, camera, tf, size, order, table)
         self._clock.lap("sort")
@@ -490,13 +522,15 @@ class Renderer(GLOwner):
                        TABLE_CUBIC=int(self.settings.table_filter == "cubic"))
         if shader == "tet":
             before_near, beyond_far = _outside_clipping_range(mesh, camera)
-            defines.update(CLIP_RANGE=int(before_near or beyond_far), PERSPECTIVE=int(not camera.parallel_projection))
+            defines.update(CLIP_RANGE=int(before_near or beyond_far or window.active),
+                           PERSPECTIVE=int(not camera.parallel_projection), **window.defines)
         # Two variants: tet.frag's exact per-fragment branch compiled in or not (NEAR_CROSSING),
         # the first for the draws whose classification sent some tet down that path.
         progs = [self._program(shader, **defines, **({"NEAR_CROSSING": on} if shader == "tet" else {}))
                  for on in (0, 1)]
         for prog in progs:
             set_uniforms(prog, **table.gl_uniforms(), **uniforms)
+            window.bind(prog)
         fb_dtype = "f4" if self.settings.framebuffer == "float32" else "f1"
         fbo = self._use_target(size, 4, fb_dtype)
         fbo.use()
@@ -513,15 +547,20 @@ class Renderer(GLOwner):
         return image
 
     def _drawing_order(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, size: tuple[int, int],
-                       order: NDArray[np.integer[Any]] | None, table: PreintegrationTable | None
+                       order: NDArray[np.integer[Any]] | None, table: PreintegrationTable | None,
+                       sort: Callable[[TetMesh, Camera], NDArray[Any]] | None = None
                        ) -> tuple[NDArray[Any], int, int]:
-        """The cells to draw, back to front: the sort (less the culled cells with
-        ``settings.cull``, which sizes its margin from ``table``) or the caller's order,
-        checked. Also returns the sort's cycle breaks and the number of culled cells."""
+        """The cells to draw, back to front: the sort (``settings.sort``, or ``sort``; less
+        the culled cells with ``settings.cull``, which sizes its margin from ``table``) or
+        the caller's order, checked. Also returns the sort's cycle breaks and the number of
+        culled cells."""
         cycle_breaks = n_culled = 0
         if order is None:
-            order_ids, sort_stats = sort_with_stats(mesh, camera, self.settings.sort)
-            cycle_breaks = sort_stats.n_cycle_breaks
+            if sort is None:
+                order_ids, sort_stats = sort_with_stats(mesh, camera, self.settings.sort)
+                cycle_breaks = sort_stats.n_cycle_breaks
+            else:
+                order_ids = sort(mesh, camera)
             if self.settings.cull:
                 # Sort everything, then filter: MPVONC constraints through culled cells hold.
                 spacing = (table or self.table(mesh, tf)).node_spacing
@@ -544,9 +583,11 @@ class Renderer(GLOwner):
     def _render_vtk(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, size: tuple[int, int],
                     order: NDArray[np.integer[Any]] | None) -> NDArray[np.float32]:
         """One frame in VTK parity (``optics="vtk"``): VTK's projected tetrahedra step for
-        step (:mod:`tetvr.gl.vtkpt`), without the table."""
+        step (:mod:`tetvr.gl.vtkpt`), without the table. ``sort="auto"`` is VTK's order
+        (centroids by depth, :func:`~tetvr.gl.vtkpt.vtk_depth_order`); another sort is honoured."""
         uniforms = self._view_uniforms(mesh, camera, size)
-        order_ids, cycle_breaks, n_culled = self._drawing_order(mesh, camera, tf, size, order, None)
+        sort = vtk_depth_order if self.settings.sort == "auto" else None
+        order_ids, cycle_breaks, n_culled = self._drawing_order(mesh, camera, tf, size, order, None, sort)
         self._clock.lap("sort")
         if self._parity is None:
             self._parity = VTKParity(self)
@@ -582,14 +623,14 @@ class Renderer(GLOwner):
         return dict(u_view=view, u_proj=proj, u_near=near, u_far=far,
                     u_ray_scale=(1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1])))
 
-    def _raymarch(self, mesh: TetMesh, camera: Camera, table: PreintegrationTable, size: tuple[int, int]
-                  ) -> NDArray[np.float32]:
+    def _raymarch(self, mesh: TetMesh, camera: Camera, table: PreintegrationTable, size: tuple[int, int],
+                  window: RayWindow = RayWindow()) -> NDArray[np.float32]:
         """One frame by tet marching (:mod:`tetvr.gl.raymarch`), with this renderer's table."""
         uniforms = self._march_uniforms(mesh, camera, size)
         defines = dict(TABLE_NORMALIZED=int(table.encoding == "normalized"), TABLE_WARP=int(table.nodes is not None),
                        TABLE_CUBIC=int(self.settings.table_filter == "cubic"))
         self._table_tex.use(0)
-        image = self._march.render(mesh, camera, size, uniforms, table.gl_uniforms(), defines, self._clock)
+        image = self._march.render(mesh, camera, size, uniforms, table.gl_uniforms(), defines, self._clock, window)
         err = self.ctx.error
         if err != "GL_NO_ERROR":
             raise RuntimeError(f"OpenGL error after rendering: {err}")
