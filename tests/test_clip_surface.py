@@ -293,6 +293,19 @@ def test_clipped_bluntfin_and_a_surface_in_it_match_the_reference(renderers):
     _check("bluntfin_clip_surface", got, want)
 
 
+@pytest.mark.gl
+def test_clip_and_surfaces_are_refused_where_they_do_not_apply():
+    mesh = synthetic.cube(2)
+    tf, cam = _tf(mesh), Camera.fit(mesh)
+    with tetvr.Renderer(RenderSettings(optics="vtk")) as r:
+        with pytest.raises(ValueError, match="VTK parity"):
+            r.render(mesh, cam, tf, size=(8, 8), clip=Clip.plane((0, 0, 0), (1, 0, 0)))
+        with pytest.raises(TypeError, match="clip must be a tetvr.Clip"):
+            r.render(mesh, cam, tf, size=(8, 8), clip=((1, 0, 0, 0),))
+        with pytest.raises(ValueError, match="shader='tet'"):
+            r.render(mesh, cam, tf, size=(8, 8), shader="floor", clip=Clip.plane((0, 0, 0), (1, 0, 0)))
+
+
 def test_surface_from_trimesh_and_meshio(tmp_path):
     trimesh = pytest.importorskip("trimesh", reason="trimesh is in the 'mesh' extra")
     box = trimesh.creation.box(extents=(1, 2, 3))

@@ -485,6 +485,9 @@ class Renderer(GLOwner):
         surfaces = check_surfaces(surfaces)
         if (clip is not None or surfaces) and shader != "tet":
             raise ValueError(f"clip and surfaces need shader='tet', got {shader!r}")
+        if (clip is not None or surfaces) and self.settings.optics == "vtk":
+            raise ValueError("clip and surfaces are not part of VTK parity (optics='vtk'), which reproduces VTK's "
+                             "projected tetrahedra as they are; use optics 'exact' or 'linear'")
         size = self._check(size)
         window = RayWindow.make(clip, camera)
         if surfaces:
