@@ -178,8 +178,8 @@ def test_pt_class2_opacity_bug(vtk_ok):
 def test_pt_parity_on_bluntfin(vtk_ok):
     """A real mesh whose cells span 3.6 down to far below max_edge / 45 (the perspective
     thickness table zeroes 17 % of them): bluntfin (187k tets) at 96x96, linear and spike
-    transfer functions, parallel and perspective. Bar: PSNR >= 55 dB, max 2/255, at most
-    5 pixels beyond 1/255; measured at 256x256 72.5-101 dB, max 2/255 on 4 pixels."""
+    transfer functions, parallel and perspective. Bar: PSNR >= 55 dB, no channel off by
+    more than 1/255; measured at 256x256 88-101 dB, max 1/255."""
     import warnings
 
     with warnings.catch_warnings():
@@ -198,7 +198,7 @@ def test_pt_parity_on_bluntfin(vtk_ok):
             got = {p: quantize8(t.render(mesh, c, tf, size=(96, 96))) for p, c in cams.items()}
         for p in cams:
             value, worst, beyond = _parity_error(got[p], want[p])
-            if value < 55.0 or worst > 2.5 or beyond > 5:
+            if value < 55.0 or worst > 1.5 or beyond:
                 where = save_failure(f"vtk_pt_bluntfin_{name}_{p}", got[p], want[p])
                 pytest.fail(f"bluntfin {name} {p}: {value:.1f} dB, worst {worst:.1f}/255, {beyond} pixels beyond "
                             f"1/255 (images in {where})")
