@@ -150,10 +150,11 @@ def _read_xdmf_series(path: Path, scalars: str | None, component: int | None) ->
 def render_frames(frames: Iterable[tuple[TetMesh, Camera]], tf: TransferFunction, *,
                   size: tuple[int, int] = (512, 512), settings: RenderSettings | None = None,
                   renderer: Any = None, progress: bool = True, total: int | None = None,
-                  desc: str = "frames") -> Iterator[Image]:
+                  desc: str = "frames", **options: Any) -> Iterator[Image]:
     """Render ``(mesh, camera)`` pairs with one renderer; yields premultiplied float images.
 
-    A tqdm progress bar counts the frames unless ``progress=False``.
+    A tqdm progress bar counts the frames unless ``progress=False``; ``options`` (``clip``,
+    ``surfaces``) go to every ``Renderer.render``.
     """
     from tqdm.auto import tqdm
 
@@ -163,7 +164,7 @@ def render_frames(frames: Iterable[tuple[TetMesh, Camera]], tf: TransferFunction
     r = renderer or Renderer(settings)
     try:
         for mesh, cam in tqdm(frames, total=total, desc=desc, unit="frame", disable=not progress):
-            yield r.render(mesh, cam, tf, size=size)
+            yield r.render(mesh, cam, tf, size=size, **options)
     finally:
         if own:
             r.release()
@@ -255,5 +256,5 @@ def animate(scene: Any, out: str | os.PathLike[str], *, orbit_frames: int | None
         meshes = [scene.mesh] * n
     cams = orbit(scene.camera, n, degrees=degrees) if orbit_frames is not None else [scene.camera] * n
     images = render_frames(zip(meshes, cams), scene.tf, size=size, settings=scene.settings,  # type: ignore[arg-type]
-                           progress=progress, total=n)
+                           progress=progress, total=n, **scene.render_options)
     return write_frames(images, out, background=scene.background, fps=fps)

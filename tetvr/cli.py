@@ -268,6 +268,8 @@ def _render(args: argparse.Namespace) -> int:
                           scalars=mesh.scalar_name, component=args.component)
     size = args.size or scene.size
     background = args.background or scene.background
+    options = _clip_and_surfaces(args, scene)
+    inputs += [("surface file", p) for p in getattr(args, "surface", None) or ()]
     coll = read_pvd(scene.mesh_path) if Path(scene.mesh_path).suffix.lower() == ".pvd" else None
     if coll is not None:
         inputs += [("collection file", p) for p in coll.input_paths()]
@@ -289,7 +291,8 @@ def _render(args: argparse.Namespace) -> int:
     for i, t, png, npy in jobs:
         ts = time.perf_counter()
         mesh = scene.mesh if i == 0 or coll is None else read_step(coll, i, scene.scalars, component=scene.component)
-        image = render(mesh, camera=scene.camera, tf=scene.tf, size=size, settings=scene.settings, method=method)
+        image = render(mesh, camera=scene.camera, tf=scene.tf, size=size, settings=scene.settings, method=method,
+                       **options)
         t2 = time.perf_counter()
         what = _write_picture(image, png, tf=scene.tf, mesh=mesh, camera=scene.camera, background=background,
                               annotate=not args.no_annotations, units=args.units,
@@ -303,6 +306,23 @@ def _render(args: argparse.Namespace) -> int:
               + (f" and {npy}" if npy else ""))
         t1 = time.perf_counter()
     return EXIT_OK
+
+
+def _clip_and_surfaces(args: argparse.Namespace, scene: Any) -> dict[str, Any]:
+    """The scene's clip and surfaces, with --clip-box, --clip-plane and --surface added."""
+    from .clip import Clip
+    from .surface import Surface
+
+    clip = scene.clip
+    box_values = getattr(args, "clip_box", None)  # commands that render a scene without these options
+    if box_values:
+        box = Clip.box(box_values[:3], box_values[3:])
+        clip = box if clip is None else clip & box
+    for values in getattr(args, "clip_plane", None) or ():
+        plane = Clip.plane(values[:3], values[3:])
+        clip = plane if clip is None else clip & plane
+    surfaces = tuple(scene.surfaces) + tuple(Surface.read(p, smooth=True) for p in getattr(args, "surface", None) or ())
+    return {**({"clip": clip} if clip is not None else {}), **({"surfaces": surfaces} if surfaces else {})}
 
 
 def _write_labelled(images: list[Any], titles: list[str], path: Path, *, cols: int | None = None,
@@ -612,6 +632,13 @@ def _parser() -> argparse.ArgumentParser:
     p_render.add_argument("--npy", help="also save the premultiplied float32 RGBA array here (.npy is added "
                           "if missing)")
     p_render.add_argument("--reference", action="store_true", help="use the exact CPU reference renderer")
+    p_render.add_argument("--clip-box", type=float, nargs=6, metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"),
+                          help="keep only the part of the mesh inside this box (world units)")
+    p_render.add_argument("--clip-plane", type=float, nargs=6, action="append",
+                          metavar=("OX", "OY", "OZ", "NX", "NY", "NZ"),
+                          help="keep only the side of the plane through O that N points into (repeatable)")
+    p_render.add_argument("--surface", action="append", metavar="FILE",
+                          help="an opaque surface (STL, OBJ, PLY, VTK, ...) drawn inside the volume (repeatable)")
     p_demo = sub.add_parser("demo", help="render the bundled demo scene", epilog=_EPILOG)
     p_demo.add_argument("-o", "--output", default="demo.png", help="PNG to write (default: ./demo.png)")
     p_fusion = sub.add_parser("fusion-demo", help="render the bundled vessel-flow fusion demo in every mode",

@@ -15,7 +15,11 @@ Schema (keys other than these are rejected; paths are relative to the JSON file)
                                           # as ParaView does (camera.reset_clipping_range)
       "size": [512, 512],
       "background": [1, 1, 1],            # for PNG output; the float image is translucent
-      "settings": {}                      # RenderSettings fields
+      "settings": {},                     # RenderSettings fields
+      "clip": {"box": [[0, 0, 0], [1, 1, 1]]},  # optional: tetvr.Clip.from_dict ("box",
+                                          # "plane": {"origin", "normal"}, "planes")
+      "surfaces": [{"path": "vessel.stl", "color": [0.9, 0.4, 0.3], "ambient": 0.25,
+                    "smooth": true}]      # optional: opaque surfaces (tetvr.Surface.read)
     }
 
 Each ``null`` (or absent key) takes the default rule's part
@@ -45,12 +49,16 @@ from .image import DEFAULT_BACKGROUND, atomic_output, image_size
 from .mesh import TetMesh, read
 from .preintegrate import check_unit_distance
 from .render import default_transfer_function
+from .clip import Clip
 from .settings import RenderSettings
+from .surface import Surface
 from .transfer import TransferFunction
 
 __all__ = ["Scene", "load_scene"]
 
-_KEYS = {"mesh", "scalars", "component", "transfer_function", "camera", "size", "background", "settings"}
+_KEYS = {"mesh", "scalars", "component", "transfer_function", "camera", "size", "background", "settings", "clip",
+         "surfaces"}
+_SURFACE_KEYS = {"path", "color", "ambient", "smooth"}
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -69,6 +77,21 @@ class Scene:
     #: True when the transfer function's unit distance came from tetvr's default rule (the
     #: scene left it null): :func:`tetvr.vtkcompare.compare` then uses ParaView's default.
     unit_distance_default: bool = False
+    #: Keep only this part of the mesh (:class:`tetvr.Clip`).
+    clip: Clip | None = None
+    #: Opaque surfaces inside the mesh, and the files they were read from.
+    surfaces: tuple[Surface, ...] = ()
+    surface_specs: tuple[dict[str, Any], ...] = ()
+
+    @property
+    def render_options(self) -> dict[str, Any]:
+        """``clip`` and ``surfaces`` for :func:`tetvr.render` / ``Renderer.render``, where set."""
+        out: dict[str, Any] = {}
+        if self.clip is not None:
+            out["clip"] = self.clip
+        if self.surfaces:
+            out["surfaces"] = self.surfaces
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], base_dir: str | os.PathLike[str] = ".") -> "Scene":
@@ -94,6 +117,8 @@ class Scene:
         if not isinstance(settings_spec, dict):
             raise ValueError(f"scene 'settings' must be an object of RenderSettings fields, got {settings_spec!r}")
         settings = RenderSettings.from_dict(settings_spec)
+        clip = Clip.from_dict(data["clip"]) if data.get("clip") is not None else None
+        specs = _surface_specs(data.get("surfaces", []), base_dir)
         path = Path(base_dir) / data["mesh"]
         mesh = read(path, scalars, component=component)
         tf_spec = data.get("transfer_function", {"preset": "viridis"})
@@ -103,7 +128,10 @@ class Scene:
             and settings.optics != "vtk"
         return cls(mesh_path=str(path), mesh=mesh, tf=tf, camera=camera, size=size,  # type: ignore[arg-type]
                    background=bg, settings=settings, scalars=mesh.scalar_name, component=component,  # type: ignore[arg-type]
-                   unit_distance_default=defaulted)
+                   unit_distance_default=defaulted, clip=clip,
+                   surfaces=tuple(Surface.read(sp["path"], **{k: v for k, v in sp.items() if k != "path"})
+                                  for sp in specs),
+                   surface_specs=specs)
 
     def to_dict(self, relative_to: str | os.PathLike[str] | None = None) -> dict[str, Any]:
         mesh_path = self.mesh_path if relative_to is None else os.path.relpath(self.mesh_path, relative_to)
@@ -116,12 +144,15 @@ class Scene:
             "size": list(self.size),
             "background": list(self.background),
             "settings": self.settings.to_dict(),
+            **({"clip": self.clip.to_dict()} if self.clip is not None else {}),
+            **({"surfaces": [dict(sp, path=sp["path"] if relative_to is None else os.path.relpath(sp["path"], relative_to))
+                             for sp in self.surface_specs]} if self.surface_specs else {}),
         }
 
     def input_paths(self) -> tuple[str, ...]:
         """The files this scene was read from besides its JSON (the mesh): what a command
         rendering it must not write over."""
-        return (self.mesh_path,)
+        return (self.mesh_path, *(sp["path"] for sp in self.surface_specs))
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write the scene as JSON (atomically; never over its own mesh file)."""
@@ -160,6 +191,25 @@ def _no_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     if dup:
         raise ValueError(f"repeated keys {dup} in a scene object")
     return dict(pairs)
+
+
+def _surface_specs(value: Any, base_dir: str | os.PathLike[str]) -> tuple[dict[str, Any], ...]:
+    """The scene's "surfaces": a list of {"path", "color", "ambient", "smooth"} (path required),
+    paths made relative to the current directory."""
+    if not isinstance(value, list):
+        raise ValueError(f"scene 'surfaces' must be a list of objects with a 'path', got {value!r}")
+    out = []
+    for i, spec in enumerate(value):
+        if not isinstance(spec, dict) or not isinstance(spec.get("path"), str):
+            raise ValueError(f"scene 'surfaces'[{i}] must be an object with a 'path' (a surface file), got {spec!r}")
+        unknown = set(spec) - _SURFACE_KEYS
+        if unknown:
+            raise ValueError(f"unknown keys {sorted(unknown)} in scene 'surfaces'[{i}]; allowed: {sorted(_SURFACE_KEYS)}")
+        sp = dict(spec, path=str(Path(base_dir) / spec["path"]))
+        if "color" in sp:
+            sp["color"] = tuple(sp["color"])
+        out.append(sp)
+    return tuple(out)
 
 
 def _int_pair(value: Any) -> tuple[int, int]:
