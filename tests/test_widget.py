@@ -366,6 +366,14 @@ def test_model_refined_frame_is_the_plain_render():
         final = model.final()
         want = tetvr.render(scene.mesh, camera=model.camera, tf=scene.tf, size=(96, 72))
         assert np.array_equal(final, want)
+        # A scene's clip is drawn by the viewer, and saved with its scene.
+        lo, hi = scene.mesh.bounds
+        clipped = dataclasses.replace(scene, clip=tetvr.Clip.plane(0.5 * (lo + hi), (0, 1, 0)))
+        model.load(clipped)
+        model.control.azimuth(25.0)
+        want = tetvr.render(scene.mesh, camera=model.camera, tf=scene.tf, size=(96, 72), clip=clipped.clip)
+        assert np.array_equal(model.final(), want) and model.scene().clip == clipped.clip
+        model.load(scene)
         # A transfer-function edit's preview uses the small table; the full frame the full one.
         model.editor.move_point(0, a=0.3)
         tf = model.editor.transfer_function()
@@ -716,6 +724,16 @@ def test_process_renderer_draws_what_the_renderer_draws_and_reports_its_errors()
             want = local.render(scene.mesh, cam, scene.tf, size=(40, 30))
             got = remote.render(scene.mesh, cam, scene.tf, size=(40, 30))
             assert got.dtype == np.float32 and np.array_equal(got, want)
+        # A clip and a surface cross the pipe too (the surface once), and draw the same bits.
+        from tests.test_clip_surface import sphere
+
+        lo, hi = scene.mesh.bounds
+        clip = tetvr.Clip.plane(0.5 * (lo + hi), (1, 0, 0))
+        ball = sphere(0.5 * (lo + hi), 0.2 * float(np.linalg.norm(hi - lo)), n=6)
+        for cam in cams:
+            want = local.render(scene.mesh, cam, scene.tf, size=(40, 30), clip=clip, surfaces=[ball])
+            got = remote.render(scene.mesh, cam, scene.tf, size=(40, 30), clip=clip, surfaces=[ball])
+            assert np.array_equal(got, want) and want[..., 3].max() == 1.0
         assert remote.gpu_bytes() > 0
         with pytest.raises(RenderProcessError, match="ValueError: .*size"):
             remote.render(scene.mesh, cams[0], scene.tf, size=(0, 30))

@@ -379,6 +379,7 @@ class ViewerModel:
         self.size = tuple(scene.size)
         self.background = tuple(scene.background)
         self.settings: RenderSettings = scene.settings
+        self.clip, self.surfaces, self._surface_specs = scene.clip, scene.surfaces, scene.surface_specs
         self.control = OrbitControl(scene.camera, bounds=scene.mesh.bounds)
         self.editor = TransferFunctionEditor.from_transfer_function(scene.tf)
         self.refiner = ProgressiveRefiner(self.size, preview_scale=self.preview_scale,  # type: ignore[arg-type]
@@ -399,7 +400,8 @@ class ViewerModel:
         """The current state as a :class:`Scene` (for :meth:`Scene.save` and ``tetvr render``)."""
         return Scene(mesh_path=self.mesh_path, mesh=self.mesh, tf=self.editor.transfer_function(),
                      camera=self.control.camera, size=self.size, background=self.background,  # type: ignore[arg-type]
-                     settings=self.settings, scalars=self.field, component=self.component)
+                     settings=self.settings, scalars=self.field, component=self.component, clip=self.clip,
+                     surfaces=self.surfaces, surface_specs=self._surface_specs)
 
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the current scene JSON (paths relative to it)."""
@@ -524,7 +526,9 @@ class ViewerModel:
             if request.sort or self.order is None or self.order.shape[0] != mesh.n_tets:
                 self.order = visibility_order(mesh, camera, self.settings.sort)
             order = self.order
-        image = renderer.render(mesh, camera, tf, size=request.size, order=order)
+        options = {**({"clip": self.clip} if self.clip is not None else {}),
+                   **({"surfaces": self.surfaces} if self.surfaces else {})}
+        image = renderer.render(mesh, camera, tf, size=request.size, order=order, **options)
         self.last_seconds = time.perf_counter() - t0
         self.last_request = request
         return image

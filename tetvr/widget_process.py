@@ -51,6 +51,7 @@ def _serve(inbox: Connection, conn: Connection) -> None:  # pragma: no cover - r
 
     renderer = None
     raycaster = None
+    surfaces: Any = ()
     mesh: Any = None
     volume: Any = None
     try:
@@ -82,7 +83,10 @@ def _serve(inbox: Connection, conn: Connection) -> None:  # pragma: no cover - r
                     conn.send(("ok", fuse(mesh, volume, msg["camera"], msg["tf"], msg["volume_tf"], size=msg["size"],
                                           mode=msg["mode"], renderer=renderer, raycaster=raycaster)))
                     continue
-                image = renderer.render(mesh, msg["camera"], msg["tf"], size=msg["size"], order=msg["order"])
+                if "surfaces" in msg:
+                    surfaces = msg["surfaces"]
+                image = renderer.render(mesh, msg["camera"], msg["tf"], size=msg["size"], order=msg["order"],
+                                        clip=msg.get("clip"), surfaces=surfaces)
                 conn.send(("ok", image))
             except Exception as exc:  # noqa: BLE001 - sent to the parent, which raises it
                 conn.send(("error", f"{type(exc).__name__}: {exc}", traceback.format_exc()))
@@ -116,6 +120,7 @@ class ProcessRenderer:
         self._proc: Any = None
         self._conn: Any = None
         self._sent_mesh: TetMesh | None = None
+        self._sent_surfaces: tuple[Any, ...] = ()
         self._sent_volume: Any = None
         self._released = False
 
@@ -135,6 +140,7 @@ class ProcessRenderer:
         self._proc = proc
         self._conn = (Connection(to_child_w, readable=False), Connection(from_child_r, writable=False))
         self._sent_mesh = self._sent_volume = None
+        self._sent_surfaces = ()
         self._conn[0].send(self.settings)
 
     def _call(self, msg: dict[str, Any]) -> Any:
@@ -154,15 +160,20 @@ class ProcessRenderer:
         return reply[1]
 
     def render(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, *, size: tuple[int, int] = (512, 512),
-               order: NDArray[np.integer[Any]] | None = None) -> NDArray[np.float32]:
+               order: NDArray[np.integer[Any]] | None = None, clip: Any = None,
+               surfaces: Any = ()) -> NDArray[np.float32]:
         """One frame: (height, width, 4) float32 premultiplied RGBA, row 0 at the top."""
         with self._lock:
             msg: dict[str, Any] = {"camera": camera, "tf": tf, "size": tuple(size), "order": order,
-                                   "settings": self.settings}
-            if mesh is not self._sent_mesh or not self.alive:
+                                   "settings": self.settings, "clip": clip}
+            fresh = not self.alive
+            if mesh is not self._sent_mesh or fresh:
                 msg["mesh"] = mesh
+            surfaces = tuple(surfaces)
+            if fresh or surfaces != self._sent_surfaces:  # sent once, as the mesh
+                msg["surfaces"] = surfaces
             image = self._call(msg)
-            self._sent_mesh = mesh
+            self._sent_mesh, self._sent_surfaces = mesh, surfaces
             return image  # type: ignore[no-any-return]
 
     def fuse(self, mesh: TetMesh, volume: Any, camera: Camera, tf: TransferFunction, volume_tf: TransferFunction, *,
@@ -195,6 +206,7 @@ class ProcessRenderer:
     def _stop(self, timeout: float = 10.0) -> None:
         proc, conn = self._proc, self._conn
         self._proc = self._conn = self._sent_mesh = self._sent_volume = None
+        self._sent_surfaces = ()
         if conn is not None:
             try:
                 conn[0].send(None)
