@@ -63,6 +63,11 @@ def _scene(mesh, view: str):
 VIEWS = ("perspective", "parallel", "inside")
 
 
+def _beyond(a, b, tol: float) -> int:
+    """Pixels where any channel of ``a`` and ``b`` differs by more than ``tol``."""
+    return int((np.abs(a.astype(np.float64) - b).max(axis=-1) > tol).sum())
+
+
 def _meshes():
     from tests.conftest import shared_file
 
@@ -101,15 +106,22 @@ def test_bricks_composite_to_the_single_process_image(client, scenes, name, n_br
     """The acceptance matrix: P = 2, 4, 8 bricks of a grid cube, the interlocking rings
     (non-convex) and bluntfin (187k tets: P = 4 and the eye inside here; bench/distributed.py
     runs P = 2, 4, 8, every view and both methods), in perspective, parallel and from
-    inside, on the workers with the default method, composited on the client.
+    inside, on the workers with the default settings ("auto": tet marching, the "auto"
+    table, 256 x 8 on these scenes), composited on the client.
 
     Where the k-d planes run along cell faces (the grid; bluntfin's curvilinear grid)
     nothing is cut and the composite is the single-process image to float32 rounding
-    (<= 1e-5; measured <= 1e-6). Where they cut cells (the rings) a ray's segment through
-    a cut cell is two table lookups instead of one: the composite differs by the table's
-    own error (measured <= 3.3e-5; bound: twice the single image's largest error against
-    the reference) and is as close to the CPU reference as the single image, within
-    0.5 dB (measured: as close or closer)."""
+    (<= 1e-5; measured <= 5.5e-6).
+
+    Where they cut cells (the rings), a ray's segment through a cut cell is two table
+    lookups instead of one, and the table's interpolation error differs between the two
+    (measured with a CPU model of the lookup on float64 geometry, which gives the GPU's
+    difference to 1e-7: 4.4e-5..9.3e-5 here; float32 rounding of the cut points adds
+    <= 4e-7). It shrinks only with a much larger table (1024 x 22: <= 8.8e-6, a 368 MiB
+    texture), so at the default table the bound is 1e-4; the view from inside has up to
+    2 pixels more, where the single image misses a ray's 9e-4-long graze of a boundary
+    tet's corner (2.4e-4 off the reference; the bricks' cut faces catch it). No pixel is
+    beyond 1/255, and the composite is as close to the reference (measured: closer)."""
     from tetvr.distributed import distribute_mesh
     from tetvr.image import psnr
 
@@ -126,9 +138,15 @@ def test_bricks_composite_to_the_single_process_image(client, scenes, name, n_br
     try:
         for view, (camera, tf, whole, ref, db_whole) in views.items():
             assert sorted(visibility_order(tree, camera)) == list(range(n_bricks))
+            assert bricks.settings_for(RenderSettings(), camera, SIZE).method == "raymarch"
             parts = bricks.render(camera, tf, size=SIZE)
             err = np.abs(parts - whole).max()
-            assert err <= (1e-5 if tree.n_cut == 0 else 2 * np.abs(whole - ref).max()), (view, err)
+            if tree.n_cut == 0:
+                assert err <= 1e-5, (view, err)
+            else:
+                assert _beyond(parts, whole, 1e-4) <= (2 if view == "inside" else 0), (view, err)
+                assert err <= 2.5e-4, (view, err)
+            assert _beyond(parts, whole, 1 / 255) == 0, view
             assert psnr(parts, ref) >= db_whole - 0.5, view
     finally:
         bricks.release()
@@ -145,6 +163,55 @@ def test_projected_bricks_composite_exactly(client, local, n_bricks, view):
                           client=client)
     assert whole[..., 3].max() > 0.5
     assert np.abs(parts - whole).max() < 1e-5
+
+
+def test_projected_cut_bricks_differ_on_isolated_pixels(client, local, scenes):
+    """Projected tetrahedra on cut bricks (the rings, P = 2, 4, 8, every view): the cuts
+    make new tets, and projected tetrahedra misjudge a segment's thickness where a ray
+    grazes a face seen almost edge-on (a pixel 0.004 px from such a face of a cut piece
+    gets alpha 0.29 for 0.20: the tet alone, whatever the sort). Such pixels appear and
+    go with the cuts: in the composite, or in the single image that the bricks then fix.
+    Measured here: at most 1 pixel beyond 1/255 and 3 beyond 5e-4 per view (P = 8 in
+    parallel projection, where the single image is 7.9e-3 off the reference and the
+    composite is not); elsewhere within the table's error, as with tet marching (at 64x64
+    in perspective the bench finds the opposite: one pixel of the composite 3.2e-2 off). Not the sort: alpha, which no order changes,
+    is what is off. "auto" takes tet marching for bricks (test_auto_takes_tet_marching_for_bricks)."""
+    from tetvr.distributed import distribute_mesh
+
+    mesh, views = scenes("rings")
+    for n_bricks in (2, 4, 8):
+        bricks = distribute_mesh(mesh, n_bricks, client)
+        try:
+            for view, (camera, tf, _, _, _) in views.items():
+                whole = local["projected"].render(mesh, camera, tf, size=SIZE)
+                parts = bricks.render(camera, tf, size=SIZE, settings=SETTINGS["projected"])
+                assert _beyond(parts, whole, 1 / 255) <= 1, (n_bricks, view)
+                assert _beyond(parts, whole, 5e-4) <= 3, (n_bricks, view)
+                assert np.abs(parts - whole).max() < 0.1, (n_bricks, view)
+        finally:
+            bricks.release()
+
+
+def test_auto_takes_tet_marching_for_bricks(client):
+    """"auto" resolves once for all bricks: tet marching, even where the whole mesh alone
+    would take projected tetrahedra for speed (a few large tets seen from outside);
+    projected tetrahedra for settings only they implement."""
+    from tetvr.distributed import distribute_mesh
+    from tetvr.method import choose
+
+    mesh = synthetic.cube(2, rotate=False)
+    camera = Camera.fit(mesh)
+    size = (512, 512)
+    assert choose(RenderSettings(), mesh, camera, size) == "projected"
+    bricks = distribute_mesh(mesh, 2, client)
+    try:
+        assert bricks.brick_tets == {b.index: len(b.tets) for b in kd_bricks(mesh, 2).bricks()}
+        assert not bricks.tangled
+        assert bricks.settings_for(RenderSettings(), camera, size).method == "raymarch"
+        assert bricks.settings_for(RenderSettings(optics="vtk"), camera, size).method == "projected"
+        assert bricks.settings_for(SETTINGS["projected"], camera, size).method == "projected"
+    finally:
+        bricks.release()
 
 
 def test_bricks_need_the_shared_origin(local):
@@ -240,7 +307,8 @@ def test_centroid_splits_warn_and_are_approximate(client, local):
 
 def _write_pvtu(folder, mesh, n_pieces: int, bad: int | None = None):
     """``mesh`` as a .pvtu of ``n_pieces`` slabs along x (by centroid: ragged, non-convex
-    partitions, as a solver's are), each piece with its own copy of the points it uses."""
+    partitions, as a solver's are), each piece with its own copy of the points it uses;
+    its field "f" is point data, or cell data where ``mesh`` has cell data."""
     x = mesh.centroids[:, 0]
     cuts = np.quantile(x, np.linspace(0, 1, n_pieces + 1)[1:-1])
     part = np.searchsorted(cuts, x)
@@ -249,14 +317,19 @@ def _write_pvtu(folder, mesh, n_pieces: int, bad: int | None = None):
         tets = mesh.tets[part == k]
         used, local_ids = np.unique(tets, return_inverse=True)
         name = f"piece_{k}.vtu"
-        meshio.Mesh(mesh.points[used], [("tetra", local_ids.reshape(-1, 4))],
-                    point_data={"f": mesh.scalars[used]}).write(folder / name)
+        if mesh.cell_data:
+            field = {"cell_data": {"f": [np.asarray(mesh.cell_scalars)[part == k]]}}
+        else:
+            field = {"point_data": {"f": mesh.scalars[used]}}
+        meshio.Mesh(mesh.points[used], [("tetra", local_ids.reshape(-1, 4))], **field).write(folder / name)
         if k == bad:
             (folder / name).write_text("<VTKFile> not a grid")
         rows.append(f'<Piece Source="{name}"/>')
     path = folder / "mesh.pvtu"
     path.write_text('<VTKFile type="PUnstructuredGrid"><PUnstructuredGrid GhostLevel="0">'
-                    '<PPointData><PDataArray type="Float64" Name="f"/></PPointData>'
+                    + ("<PCellData>" if mesh.cell_data else "<PPointData>")
+                    + '<PDataArray type="Float64" Name="f"/>'
+                    + ("</PCellData>" if mesh.cell_data else "</PPointData>") +
                     '<PPoints><PDataArray type="Float64" NumberOfComponents="3"/></PPoints>'
                     + "".join(rows) + "</PUnstructuredGrid></VTKFile>")
     return path
@@ -266,9 +339,12 @@ def _write_pvtu(folder, mesh, n_pieces: int, bad: int | None = None):
 def test_pvtu_pieces_redistributed_render_as_the_merged_mesh(client, local, scenes, tmp_path, name):
     """A .pvtu of 4 pieces (ragged slabs) is read on the workers and redistributed into 4
     k-d bricks there; the composite is the merged mesh's single-process image: to float32
-    rounding on the grid (planes along faces), within the table's error where cells are
-    cut (the rings; the table is sized by the pieces' segment samples, not the merged
-    mesh's), and as close to the reference."""
+    rounding on the grid (planes along faces; <= 1e-5, measured 2.4e-7). The rings' cells
+    are cut at planes chosen on a sample (not those of kd_bricks): within the table's
+    error (measured 5.4e-5..8.8e-5), but for 2 pixels of the parallel view (3.5e-4),
+    where the single image is 2.2e-4 and 4.1e-4 off the reference and the composite
+    1.1e-4 and 5.5e-5; no pixel beyond 1/255, and as close to the reference (measured
+    1.5..2.3 dB closer)."""
     from tetvr.distributed import distribute_pieces
     from tetvr.image import psnr
 
@@ -284,9 +360,46 @@ def test_pvtu_pieces_redistributed_render_as_the_merged_mesh(client, local, scen
             whole = local["auto"].render(merged, camera, tf, size=SIZE)
             parts = bricks.render(camera, tf, size=SIZE)
             err = np.abs(parts - whole).max()
-            # cut cells (the rings): within the single image's own error against the reference
-            assert err <= (1e-5 if name == "cube" else 2 * np.abs(whole - ref).max()), (view, err)
+            if name == "cube":
+                assert err <= 1e-5, (view, err)
+            else:  # cut cells: the table's error (test_bricks_composite_to_the_single_process_image)
+                assert _beyond(parts, whole, 1e-4) <= 2, (view, err)
+                assert err <= 5e-4, (view, err)
+            assert _beyond(parts, whole, 1 / 255) == 0, view
             assert psnr(parts, ref) >= psnr(whole, ref) - 0.5, view
+    finally:
+        bricks.release()
+
+
+@pytest.mark.parametrize("name", ["cube", "rings"])
+def test_pvtu_pieces_with_cell_data_render_as_the_merged_mesh(client, local, scenes, tmp_path, name):
+    """A .pvtu of 4 pieces whose field is cell data (a random value per tet) is
+    redistributed into 4 k-d bricks on the workers, each piece of a cut cell keeping its
+    cell's value; the composite (default settings) is the merged mesh's single-process
+    image (read from the .pvtu: cell data, constant in each tet), within 1e-5: measured
+    7.1e-6 on the grid (planes along faces; in perspective, the others <= 5.4e-7) and
+    <= 6.3e-7 on the rings, whose cells the planes cut: a constant-scalar segment is read
+    on the table's diagonal, where colour is exact and alpha is exact in the thickness,
+    so two lookups for a cut segment give what one gives (point data differs there by the
+    table's error, test_bricks_composite_to_the_single_process_image)."""
+    from tetvr.distributed import distribute_pieces
+
+    base, views = scenes(name)
+    rng = np.random.default_rng(1)
+    mesh = base.with_cell_scalars(rng.random(base.n_tets), "f")
+    path = _write_pvtu(tmp_path, mesh, 4)
+    merged = tetvr.read(path)
+    assert merged.cell_data and merged.n_tets == mesh.n_tets
+    assert merged.scalar_range == mesh.scalar_range
+    bricks = distribute_pieces(path, 4, client)
+    try:
+        assert bricks.n_bricks == 4 and bricks.whole.n_tets == mesh.n_tets
+        for view, (camera, _, _, _, _) in views.items():
+            _, tf = _scene(mesh, view)
+            whole = local["auto"].render(merged, camera, tf, size=SIZE)
+            assert whole[..., 3].max() > 0.3
+            parts = bricks.render(camera, tf, size=SIZE)
+            assert np.abs(parts - whole).max() <= 1e-5, view
     finally:
         bricks.release()
 

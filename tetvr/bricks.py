@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
-from typing import Any, Sequence
+from typing import Any, NamedTuple, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -43,7 +43,7 @@ from .camera import Camera
 from .mesh import TetMesh
 
 __all__ = ["Brick", "BrickTree", "Split", "Whole", "kd_bricks", "visibility_order", "composite_over", "part_mesh",
-           "plan_bricks", "select_cells", "clip_to_box", "merge_parts", "leaf_boxes", "leaves"]
+           "Part", "plan_bricks", "select_cells", "clip_to_box", "merge_parts", "leaf_boxes", "leaves"]
 
 #: A split plane whose straddle-free position is this far (as a fraction of the node's cells)
 #: from the balanced rank is not taken; the centroid median is, with its cells cut.
@@ -251,13 +251,6 @@ def kd_bricks(mesh: TetMesh, n_bricks: int, *, cut: bool = True) -> BrickTree:
     cells = mesh.cell_scalars if cell_data else np.zeros(mesh.n_tets)
     root = build(mesh.tets.astype(np.int64), int(n_bricks), np.asarray(cells, dtype=np.float64))
     return BrickTree(root, state["points"], state["scalars"], mesh)
-
-
-def _no_cell_data(mesh: TetMesh) -> None:
-    if mesh.cell_scalars is not None:
-        raise NotImplementedError(f"solver pieces with cell data ({mesh.scalar_name!r}) are not redistributed yet: "
-                                  "read the pieces with cell_data='average', or merge them and split the mesh "
-                                  "(kd_bricks carries cell data)")
 
 
 def _check_n_bricks(n_bricks: Any, n_tets: int) -> None:
@@ -515,47 +508,62 @@ def leaf_boxes(tree: "Split | Brick", bounds: ArrayLike) -> dict[int, NDArray[np
     return out
 
 
-def select_cells(mesh: TetMesh, box: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
-    """The cells of ``mesh`` whose bounding box overlaps the inside of ``box``, as
-    (points, tets, scalars) of their own points: what a piece sends to one brick."""
-    _no_cell_data(mesh)
+class Part(NamedTuple):
+    """Cells with their own points: what a piece sends a brick, and what a brick joins.
+
+    ``cells`` holds one value per row of ``tets`` for cell data, None for point data."""
+
+    points: NDArray[np.float64]
+    tets: NDArray[np.int64]
+    scalars: NDArray[np.float64]
+    cells: NDArray[np.float64] | None = None
+
+
+def select_cells(mesh: TetMesh, box: ArrayLike) -> Part:
+    """The cells of ``mesh`` whose bounding box overlaps the inside of ``box``, with their
+    own points (and their values, for cell data): what a piece sends to one brick."""
     b = np.asarray(box, dtype=np.float64).reshape(2, 3)
     corners = mesh.points[mesh.tets]
     lo, hi = corners.min(axis=1), corners.max(axis=1)
     inside = np.all((lo < b[1]) & (hi > b[0]), axis=1)
     t = mesh.tets[inside].astype(np.int64)
     used, local = np.unique(t, return_inverse=True)
-    return mesh.points[used], local.reshape(-1, 4), mesh.scalars[used]
+    cells = None if mesh.cell_scalars is None else np.asarray(mesh.cell_scalars, dtype=np.float64)[inside]
+    return Part(mesh.points[used], local.reshape(-1, 4), mesh.scalars[used], cells)
 
 
-def merge_parts(parts: Sequence[tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]]
-                ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64]]:
-    """Parts from several pieces as one (points, tets, scalars): points with equal
-    coordinates joined (pieces repeat the points on the faces they share), so the cells
-    conform across the pieces' seams as in one file."""
-    parts = [p for p in parts if len(p[1])]
+def merge_parts(parts: Sequence[Part]) -> Part:
+    """Parts from several pieces as one: points with equal coordinates joined (pieces
+    repeat the points on the faces they share), so the cells conform across the pieces'
+    seams as in one file. Cell values follow their cells; the parts are all point data or
+    all cell data."""
+    parts = [Part(*p) for p in parts if len(p[1])]
     if not parts:
-        return np.zeros((0, 3)), np.zeros((0, 4), dtype=np.int64), np.zeros(0)
-    offsets = np.cumsum([0] + [len(p[0]) for p in parts])
-    pts = np.concatenate([p[0] for p in parts])
-    tets = np.concatenate([p[1] + off for p, off in zip(parts, offsets)])
-    s = np.concatenate([p[2] for p in parts])
+        return Part(np.zeros((0, 3)), np.zeros((0, 4), dtype=np.int64), np.zeros(0))
+    kinds = {p.cells is None for p in parts}
+    if len(kinds) > 1:
+        raise ValueError("parts mix point data and cell data")
+    offsets = np.cumsum([0] + [len(p.points) for p in parts])
+    pts = np.concatenate([p.points for p in parts])
+    tets = np.concatenate([p.tets + off for p, off in zip(parts, offsets)])
+    s = np.concatenate([p.scalars for p in parts])
+    cells = None if parts[0].cells is None else np.concatenate([np.asarray(p.cells, dtype=np.float64) for p in parts])
     uniq, first, inverse = np.unique(pts, axis=0, return_index=True, return_inverse=True)
-    return uniq, inverse.reshape(-1)[tets], s[first]
+    return Part(uniq, inverse.reshape(-1)[tets], s[first], cells)
 
 
-def clip_to_box(points: NDArray[np.float64], tets: NDArray[np.int64], scalars: NDArray[np.float64],
-                path: Sequence[tuple[int, float, bool]]) -> tuple[NDArray[np.float64], NDArray[np.int64],
-                                                                  NDArray[np.float64], int]:
+def clip_to_box(part: Part, path: Sequence[tuple[int, float, bool]]) -> tuple[Part, int]:
     """The part of the cells inside a brick's box: cut at each plane of the brick's path
-    from the root (``(axis, plane, low side?)``) and the other side left. Returns the
-    points, tets and scalars, and how many cells were cut."""
+    from the root (``(axis, plane, low side?)``) and the other side left; each piece of a
+    cut cell keeps its cell's value. Returns the part and how many cells were cut."""
+    points, tets, scalars, cells = part
+    vals = np.zeros(len(tets)) if cells is None else np.asarray(cells, dtype=np.float64)
     n_cut = 0
     for axis, plane, low in path:
-        points, scalars, below, above, _, _, k = cut_at_plane(points, scalars, tets, axis, plane)
-        tets = below if low else above
+        points, scalars, below, above, v_below, v_above, k = cut_at_plane(points, scalars, tets, axis, plane, vals)
+        tets, vals = (below, v_below) if low else (above, v_above)
         n_cut += k
-    return points, tets, scalars, n_cut
+    return Part(points, tets, scalars, None if cells is None else vals), n_cut
 
 
 def leaf_paths(tree: "Split | Brick") -> dict[int, list[tuple[int, float, bool]]]:

@@ -40,7 +40,7 @@ from .camera import Camera
 from .image import image_size
 from .mesh import TetMesh
 from .settings import RenderSettings
-from .bricks import (Brick, BrickTree, Split, Whole, _check_n_bricks, clip_to_box, composite_over, kd_bricks,
+from .bricks import (Brick, BrickTree, Part, Split, Whole, _check_n_bricks, clip_to_box, composite_over, kd_bricks,
                      leaf_boxes, leaf_paths, merge_parts, part_mesh, plan_bricks, select_cells, visibility_order)
 from .transfer import TransferFunction, default_unit_distance
 
@@ -324,6 +324,13 @@ def _hold(brick: TetMesh) -> TetMesh:
     return brick
 
 
+def _brick_facts(brick: TetMesh) -> tuple[int, bool]:
+    """A brick's cell count and whether it is tangled (folded faces), which "auto" reads."""
+    from .marching import folded_faces
+
+    return brick.n_tets, folded_faces(brick) > 0
+
+
 class ClusterBricks:
     """One mesh as k-d bricks (:mod:`tetvr.bricks`) held by a cluster's workers, each
     worker only its bricks; :meth:`render` renders a view on the workers and composites
@@ -334,32 +341,45 @@ class ClusterBricks:
     root : the k-d tree (its planes order the bricks for each view).
     whole : what the bricks share with the whole mesh (:class:`tetvr.bricks.Whole`).
     labels : each brick's name in error messages (the pieces it came from).
+    brick_tets : each brick's cell count (cut pieces included).
+    tangled : whether any brick has folded faces (:func:`tetvr.marching.folded_faces`).
     """
 
     def __init__(self, client: Any, futures: dict[int, Any], root: "Split | Brick", whole: Whole,
-                 labels: dict[int, str], chooser: TetMesh | None = None) -> None:
+                 labels: dict[int, str]) -> None:
         self.client = client
         self.futures = futures
         self.root = root
         self.whole = whole
         self.labels = labels
-        self._chooser = chooser  # the mesh (or a sample of it) that "auto" chooses the method by
+        # Counted and checked on the workers, where the bricks are.
+        facts = dict(zip(futures, client.gather([client.submit(_brick_facts, f, pure=False)
+                                                 for f in futures.values()])))
+        self.brick_tets = {i: n for i, (n, _) in facts.items()}
+        self.tangled = any(t for _, t in facts.values())
 
     @property
     def n_bricks(self) -> int:
         return len(self.futures)
 
     def settings_for(self, settings: RenderSettings, camera: Camera, size: tuple[int, int]) -> RenderSettings:
-        """``settings`` with ``method="auto"`` resolved for the whole mesh: every brick then
-        renders with the method the whole would have (a brick alone could choose another)."""
+        """``settings`` with ``method="auto"`` resolved once for every brick (a brick alone
+        could choose another): tet marching wherever it can render the bricks, projected
+        tetrahedra only for settings only they implement
+        (:data:`tetvr.method.PROJECTED_ONLY`), a tangled mesh, or a brick above
+        :data:`tetvr.method.AUTO_MAX_TETS` cells (memory: the limit is per brick, as a
+        worker renders one brick at a time). Unlike a single mesh, bricks never take
+        projected tetrahedra for speed: the planes' cuts make new faces, and projected
+        tetrahedra err on isolated pixels where a ray grazes a face seen edge-on
+        (docs/distributed.md, "Where the composite is exact"). ``camera`` and ``size`` do
+        not enter the choice."""
         from .method import AUTO_MAX_TETS, choose
 
         if settings.method != "auto":
             return settings
-        if self.whole.n_tets > AUTO_MAX_TETS:
+        method = choose(settings)  # what the settings alone decide
+        if method == "raymarch" and (self.tangled or max(self.brick_tets.values(), default=0) > AUTO_MAX_TETS):
             method = "projected"
-        else:
-            method = choose(settings, self._chooser, camera, size)
         return dataclasses.replace(settings, method=method)  # type: ignore[arg-type]
 
     def render(self, camera: Camera, tf: TransferFunction, *, size: tuple[int, int] = (512, 512),
@@ -397,8 +417,8 @@ def distribute_mesh(mesh: TetMesh, n_bricks: int, client: Any, *, tree: BrickTre
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="Sending large graph")
         futures = {b.index: client.submit(_hold, tree.brick_mesh(b), pure=False) for b in tree.bricks()}
-    return ClusterBricks(client, futures, tree.root, tree.whole, {i: f"{len(tree.bricks())} k-d bricks of the mesh"
-                                                                  for i in futures}, chooser=mesh)
+    labels = {i: f"{len(tree.bricks())} k-d bricks of the mesh" for i in futures}
+    return ClusterBricks(client, futures, tree.root, tree.whole, labels)
 
 
 def render_bricks(
@@ -442,13 +462,12 @@ def _read_piece(path: str, scalars: str | None, component: int | None) -> TetMes
 
 
 def _piece_summary(piece: TetMesh, n_segments: int) -> dict[str, Any]:
-    from .bricks import _no_cell_data
     from .tablesize import sample_segments
 
-    _no_cell_data(piece)
     seg = sample_segments(piece, n_segments)
     return {"n_tets": piece.n_tets, "bounds": piece.bounds, "scalar_range": piece.scalar_range,
-            "max_edge": piece.max_edge, "segments": seg, "scalar_name": piece.scalar_name}
+            "max_edge": piece.max_edge, "segments": seg, "scalar_name": piece.scalar_name,
+            "cell_data": piece.cell_data}
 
 
 def _piece_sample(piece: TetMesh, k: int) -> NDArray[np.float64]:
@@ -456,17 +475,16 @@ def _piece_sample(piece: TetMesh, k: int) -> NDArray[np.float64]:
     return piece.points[piece.tets[ids]]
 
 
-def _piece_part(piece: TetMesh, box: NDArray[np.float64]) -> tuple[Any, Any, Any]:
+def _piece_part(piece: TetMesh, box: NDArray[np.float64]) -> Part:
     return select_cells(piece, box)
 
 
 def _assemble_brick(index: int, label: str, path: list[tuple[int, float, bool]], whole: Whole, scalar_name: str,
-                    *parts: tuple[Any, Any, Any]) -> TetMesh:
-    points, tets, scalars = merge_parts(parts)
-    points, tets, scalars, _ = clip_to_box(points, tets, scalars, path)
-    if len(tets) == 0:
+                    *parts: Part) -> TetMesh:
+    part, _ = clip_to_box(merge_parts(parts), path)
+    if len(part.tets) == 0:
         raise ValueError(f"brick {index} ({label}) holds no cells: fewer bricks, or a larger sample")
-    return part_mesh(points, tets, scalars, whole, scalar_name=scalar_name)
+    return part_mesh(part.points, part.tets, part.scalars, whole, scalar_name=scalar_name, cell_scalars=part.cells)
 
 
 def _combined_sample(summaries: list[dict[str, Any]]) -> Any:
@@ -517,6 +535,11 @@ def distribute_pieces(pieces: Any, n_bricks: int, client: Any, *, scalars: str |
     summaries = client.gather([client.submit(_piece_summary, r, per_piece, pure=False) for r in read])
     total = sum(s["n_tets"] for s in summaries)
     _check_n_bricks(n_bricks, total)
+    kinds = {(s["scalar_name"], s["cell_data"]) for s in summaries}
+    if len(kinds) > 1:
+        raise ValueError("the pieces do not carry one field: " + ", ".join(
+            f"{os.path.basename(f)}: {s['scalar_name']!r} ({'cell' if s['cell_data'] else 'point'} data)"
+            for f, s in zip(files, summaries)))
     corners = np.concatenate(client.gather([
         client.submit(_piece_sample, r, max(1, -(-sample * s["n_tets"] // total)), pure=False)
         for r, s in zip(read, summaries)]))
@@ -547,10 +570,7 @@ def distribute_pieces(pieces: Any, n_bricks: int, client: Any, *, scalars: str |
         if f.status == "error":
             f.result()
     del read
-    chooser = TetMesh.from_arrays(corners.reshape(-1, 3), np.arange(corners.shape[0] * 4).reshape(-1, 4),
-                                  np.zeros(corners.shape[0] * 4))
-    chooser.__dict__["bounds"] = bounds  # "auto" asks whether the eye is near the whole mesh
-    return ClusterBricks(client, futures, root, whole, labels, chooser=chooser)
+    return ClusterBricks(client, futures, root, whole, labels)
 
 
 def render_pieces(
