@@ -31,7 +31,7 @@ llvmpipe). A separate process is also how ParaView runs next to an application.
 
 VTK is optional (``pip install "tetvr[compare]"``): this module imports it only in the
 VTK process, and :func:`vtk_status` says whether it can render here.
-:data:`PARITY_SETTINGS` are tetvr's settings closest to the "Projected tetra" convention.
+:data:`PARITY_SETTINGS` render what "Projected tetra" renders (VTK parity).
 """
 
 from __future__ import annotations
@@ -78,13 +78,13 @@ MAPPERS: dict[str, tuple[str, str]] = {
     "zsweep": ("vtkUnstructuredGridVolumeZSweepMapper", "Z sweep"),
 }
 
-#: tetvr's closest match to VTK's projected tetrahedra (docs/paraview.md): VTK's fragment
-#: formula (``tau = a/u``, mean end colour, see :func:`tetvr.optics.vtk_segments`) with
-#: screen-linear interpolation like VTK's ``w = 1`` vertices. VTK composites in a float
-#: target (``UseFloatingPointFrameBuffer``, on by default) and rounds to 8 bits once, when
-#: it copies to the window: so the table and target stay float here and :func:`compare`
-#: rounds the final image (an 8-bit target, rounding at every blend, measured 6 dB further
-#: from VTK). The remaining differences are listed in docs/paraview.md.
+#: tetvr's VTK parity: ``optics="vtk"`` on the GPU draws VTK's projected tetrahedra with
+#: VTK's own steps (:mod:`tetvr.gl.vtkpt`: 8-bit vertex colours, its thick vertex and
+#: class-2 opacity, its perspective thickness table, screen-linear interpolation, its
+#: drawing order). VTK composites in a float target (``UseFloatingPointFrameBuffer``, on by
+#: default) and rounds to 8 bits once, when it copies to the window: so the target stays
+#: float here and :func:`compare` rounds the final image (:func:`quantize8`). What remains
+#: different is listed in docs/paraview.md ("What parity does not reproduce").
 PARITY_SETTINGS = RenderSettings(optics="vtk", perspective_correct=False)
 
 
@@ -534,6 +534,13 @@ def compare(
     if not (isinstance(views, int) and views >= 1):
         raise ValueError(f"views must be a positive integer, got {views!r}")
     say = log or (lambda line: None)
+    vtk_info: dict[str, Any] = {}
+    if mappers:
+        # Before anything is rendered: the reference alone takes seconds to minutes.
+        ok, why = vtk_status()
+        if not ok:
+            raise VTKUnavailableError(why)
+        vtk_info["status"] = why
     width, height = (int(v) for v in (size or scene.size))
     size = (width, height)
     unit_from = "the scene"
@@ -579,12 +586,6 @@ def compare(
         methods.append(meth)
         say(f"{label}: first {meth.first_frame_s:.3f} s, view change {statistics.median(meth.view_change_s):.3f} s")
 
-    vtk_info: dict[str, Any] = {}
-    if mappers:
-        ok, why = vtk_status()
-        if not ok:
-            raise VTKUnavailableError(why)
-        vtk_info["status"] = why
     for key in mappers:
         cls, pv_name = MAPPERS[key]
         meth = _Method(f"vtk_{key}", f'VTK {cls} (ParaView "{pv_name}")', "vtk")
@@ -604,7 +605,8 @@ def compare(
     result = _table(scene, size, views, azimuth_step, methods, refs, vtk_info)
     result["scene"]["unit_distance_from"] = unit_from
     if outdir is not None:
-        write_report(result, outdir, images={m.key: m.image for m in methods if m.image is not None})
+        write_report(result, outdir, images={m.key: m.image for m in methods if m.image is not None},
+                     background=scene.background)
     return result
 
 
@@ -650,15 +652,18 @@ def _table(scene: Any, size: tuple[int, int], views: int, step: float, methods: 
 
 
 def write_report(result: dict[str, Any], outdir: str | os.PathLike[str], *,
-                 images: dict[str, NDArray[np.float32]] | None = None, diff_gain: float = 10.0) -> Path:
+                 images: dict[str, NDArray[np.float32]] | None = None, diff_gain: float = 10.0,
+                 background: Any = None) -> Path:
     """Write ``comparison.json``, ``comparison.md`` and, with ``images``, the pictures.
 
     Pictures: ``side_by_side.png`` (every method in table order, four to a row, each
     titled with its number, name and PSNR against the exact reference), ``differences.png``
     (``|image - exact reference|`` of premultiplied RGB times ``diff_gain``, same order)
     and one ``<key>.png`` / ``<key>_diff.png`` per method. Without matplotlib the two
-    grids are written untitled.
+    grids are written untitled. The images are drawn over ``background`` (the scene's;
+    default :data:`tetvr.image.DEFAULT_BACKGROUND`), the differences over black.
     """
+    bg = {} if background is None else {"background": tuple(background)}
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "comparison.json", "w") as f:
@@ -670,7 +675,7 @@ def write_report(result: dict[str, Any], outdir: str | os.PathLike[str], *,
             if m["key"] not in images:
                 continue
             img = images[m["key"]]
-            write_png(img, out / f"{m['key']}.png")
+            write_png(img, out / f"{m['key']}.png", **bg)
             tiles.append(img)
             db = (m.get("psnr") or {}).get("exact")
             name = m["label"] if len(m["label"]) <= 26 else m["key"]  # the table has the full name
@@ -682,20 +687,21 @@ def write_report(result: dict[str, Any], outdir: str | os.PathLike[str], *,
                 d[..., 3] = 1.0
                 write_png(d, out / f"{m['key']}_diff.png", background=None)
                 diffs.append(d)
-        _write_grid(tiles, titles, out / "side_by_side.png", suptitle=None)
+        _write_grid(tiles, titles, out / "side_by_side.png", suptitle=None, **bg)
         if diffs:
             _write_grid(diffs, titles, out / "differences.png", suptitle=f"|image - exact reference| x {diff_gain:g}")
     (out / "comparison.md").write_text(_markdown(result, diff_gain))
     return out
 
 
-def _write_grid(images: list[NDArray[np.float32]], titles: list[str], path: Path, *, suptitle: str | None) -> None:
+def _write_grid(images: list[NDArray[np.float32]], titles: list[str], path: Path, *, suptitle: str | None,
+                **background: Any) -> None:
     try:
         from .annotate import panels
 
-        data = panels(images, titles, cols=min(4, len(images)), suptitle=suptitle)
+        data = panels(images, titles, cols=min(4, len(images)), suptitle=suptitle, **background)
     except ImportError:  # matplotlib absent: the grid without its titles
-        write_png(tile_images(images), path)
+        write_png(tile_images(images), path, **background)
         return
     with atomic_output(path) as f:
         f.write(data)
