@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results"
 #: Files whose table blocks this script owns.
 DOCS = (ROOT / "docs" / "interactive.md", ROOT / "README.md", ROOT / "bench" / "README.md", ROOT / "docs" / "methods.md", ROOT / "docs" / "limits.md",
-        ROOT / "docs" / "distributed.md")
+        ROOT / "docs" / "distributed.md", ROOT / "docs" / "paraview.md")
 
 
 def _load(name: str) -> dict[str, Any]:
@@ -61,6 +61,65 @@ def vs_paraview() -> str:
             f"the exact image where VTK reaches {p['vtk_pt']['exact']:.0f} dB, at {v['tetvr'] * 1e3:.0f} ms per "
             f"view change to VTK's {v['vtk_pt'] * 1e3:.0f} ms on the same software GL "
             f"(`bench/results/vs_vtk.json`, {r['date'][:10]}).")
+
+
+_ANATOMY_TFS = {"linear": "linear", "default": "viridis (9 points)", "spike": "spike"}
+
+
+def parity_anatomy() -> str:
+    """VTK parity against VTK's own projected tetrahedra on bluntfin, and both against the
+    reference in VTK's convention (bench/vs_vtk.py --anatomy)."""
+    r = _load("vs_vtk_anatomy.json")
+    rows = ["| transfer function, view | VTK PT vs tetvr parity | max difference | pixels beyond 1/255 "
+            "| VTK PT vs reference in its own convention | tetvr parity vs that reference |",
+            "|---|---:|---:|---:|---:|---:|"]
+    for proj in ("parallel", "perspective"):
+        for key, label in _ANATOMY_TFS.items():
+            c = r["cases"][f"{key}, {proj}"]
+            rows.append(f"| {label}, {proj} | {c['VTK PT vs tetvr parity']:.1f} dB "
+                        f"| {c['VTK PT vs tetvr parity, max (1/255)']:.0f}/255 "
+                        f"| {c['VTK PT vs tetvr parity, pixels beyond 1/255']} "
+                        f"| {c['VTK PT vs reference in its own convention']:.1f} dB "
+                        f"| {c['tetvr parity vs vtk reference']:.1f} dB |")
+    size = "x".join(str(x) for x in r["size"])
+    return (f"{r['mesh']}, {r['n_tets']:,} tets, {size}, `Camera.fit`; PSNR of premultiplied RGB, tetvr's "
+            f"image rounded to 8 bits like VTK's window ({r['date'][:10]}, `bench/results/vs_vtk_anatomy.json`, "
+            f"{r['vtk_status']}).\n\n" + "\n".join(rows))
+
+
+def parity_vs_exact() -> str:
+    """VTK's projected tetrahedra and tetvr's default against the exact image (bluntfin;
+    bench/vs_vtk.py --anatomy)."""
+    r = _load("vs_vtk_anatomy.json")
+    size = "x".join(str(x) for x in r["size"])
+    cases = r["cases"]
+    rows = [f"| {r['mesh'].split()[0]}, {size} | " + " | ".join(f"{v} TF" if k == "linear" else v
+                                                               for k, v in _ANATOMY_TFS.items()) + " |",
+            "|---|---|---|---|"]
+    for label, key in (("VTK projected tetra", "VTK PT vs exact reference"),
+                       ("tetvr (default settings)", "tetvr vs exact reference")):
+        rows.append(f"| {label}, parallel / perspective | " + " | ".join(
+            f"{cases[f'{k}, parallel'][key]:.1f} / {cases[f'{k}, perspective'][key]:.1f} dB" for k in _ANATOMY_TFS)
+            + " |")
+    return "\n".join(rows)
+
+
+def compare_demo() -> str:
+    """All of tetvr's GPU modes and VTK's three mappers on the bundled demo (tetvr compare)."""
+    r = json.loads((RESULTS / "compare_demo" / "comparison.json").read_text())
+    names = {"tetvr": "tetvr GPU (default)", "tetvr_parity": "tetvr GPU, VTK parity",
+             "vtk_pt": 'VTK "Projected tetra"', "vtk_bunyk": 'VTK "Bunyk ray cast"', "vtk_zsweep": 'VTK "Z sweep"'}
+    rows = ["| method | first frame | view change | PSNR vs exact | vs reference in VTK's convention | vs VTK PT |",
+            "|---|---|---|---|---|---|"]
+    for m in r["methods"]:
+        if m["key"] not in names:
+            continue
+        vs_pt = "" if m["key"] == "vtk_pt" else f"{m['psnr_vs_vtk_pt']:.1f} dB"
+        rows.append(f"| {names[m['key']]} | {m['first_frame_s']:.2f} s | {m['view_change_s']:.3f} s "
+                    f"| {m['psnr']['exact']:.1f} dB | {m['psnr']['vtk']:.1f} dB | {vs_pt} |")
+    w, h = r["scene"]["size"]
+    return (f"{r['scene']['n_tets']:,} tets, {w}x{h}, median of {r['timing']['views']} view changes; "
+            f"{r['vtk'].get('status', '')} (`bench/results/compare_demo/comparison.json`).\n\n" + "\n".join(rows))
 
 
 def raymarch_stages() -> str:
@@ -288,7 +347,9 @@ def viewer_latency() -> str:
             f"Mesa llvmpipe, {load} ({r['date']}, `bench/results/viewer.json`).\n\n" + "\n".join(rows))
 
 
-TABLES: dict[str, Callable[[], str]] = {"viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages,
+TABLES: dict[str, Callable[[], str]] = {"parity_anatomy": parity_anatomy, "parity_vs_exact": parity_vs_exact,
+                                        "compare_demo": compare_demo,
+                                        "viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages,
                                         "volume_accuracy": volume_accuracy,
                                         "spiky_tf": spiky_tf, "degenerate": degenerate,
                                         "distributed_series": distributed_series,

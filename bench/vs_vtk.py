@@ -328,6 +328,10 @@ def anatomy(name: str, mesh: TetMesh, size: tuple[int, int], out: Path) -> dict[
                 "colour averaging: linear vs vtk reference": psnr(refs["linear"], refs["vtk"]),
                 "VTK PT vs reference in its own convention": psnr(vtk, refs["vtk"]),
                 "VTK PT vs tetvr parity": psnr(vtk, parity),
+                # Never PSNR alone: the largest channel difference (in 8-bit steps) and the pixels beyond one step.
+                "VTK PT vs tetvr parity, max (1/255)": float(np.abs(vtk.astype(np.float64) - parity).max() * 255),
+                "VTK PT vs tetvr parity, pixels beyond 1/255": int(
+                    (np.abs(vtk.astype(np.float64) - parity).max(axis=-1) > 1.5 / 255).sum()),
                 "tetvr parity vs vtk reference": psnr(parity, refs["vtk"]),
                 "VTK PT vs exact reference": psnr(vtk, refs["exact"]),
                 "tetvr vs exact reference": psnr(ours, refs["exact"]),

@@ -42,8 +42,8 @@ CROSSOVER_SEGMENTS_PER_TET = 430.0
 AUTO_MAX_TETS = 2_000_000
 _SAMPLE = 4096
 
-#: Settings only projected tetrahedra implement: VTK's fragment formula (parity mode with
-#: VTK's screen-linear interpolation) and an 8-bit compositing target.
+#: Settings only projected tetrahedra implement: VTK parity (VTK's projected tetrahedra,
+#: tetvr.gl.vtkpt), screen-linear interpolation and an 8-bit compositing target.
 PROJECTED_ONLY = ("optics='vtk'", "framebuffer='uint8'", "perspective_correct=False")
 #: Settings only the ray caster implements (none so far).
 RAYMARCH_ONLY: tuple[str, ...] = ()

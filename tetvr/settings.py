@@ -102,8 +102,12 @@ class RenderSettings:
         ``"exact"`` (``tau = -ln(1 - a)/u``, the default), ``"linear"`` (``tau = a/u``, the
         convention of VTK's unstructured-grid mappers, integrated exactly) or ``"vtk"``
         (``tau = a/u`` and the mean of a segment's end colours, VTK's projected-tetrahedra
-        fragment formula). ``tetvr.vtkcompare.PARITY_SETTINGS`` pairs ``"vtk"`` with VTK's
-        screen-linear interpolation; see docs/paraview.md.
+        fragment formula). On the GPU ``"vtk"`` is VTK parity: projected tetrahedra drawn with
+        VTK's own steps (colours classified at the vertices in 8 bits, its thick vertex, its
+        perspective thickness table, screen-linear interpolation, its drawing order with
+        ``sort="auto"``; :mod:`tetvr.gl.vtkpt`), so the table settings and
+        ``perspective_correct`` do not apply to it; the CPU reference computes the formula on
+        exact geometry. ``tetvr.vtkcompare.PARITY_SETTINGS``; see docs/paraview.md.
 
     Examples
     --------
