@@ -21,10 +21,18 @@
 // starts at the entry, but only each segment's part inside the pixel's window is
 // composited (its scalars from the tet's linear field at the cut), and it stops at the
 // window's far end.
+// INTEGRATION_EXACT 1: no table; each segment is cut where its scalar crosses a control
+// point of the transfer function and each cut integrated in closed form and by quadrature
+// (raycast_exact.glsl, the reference's model in float32).
 
 #include "march_common.glsl"
-#include "lookup.glsl"
 #include "window.glsl"
+#if INTEGRATION_EXACT
+#include "tf_points.glsl"
+#include "raycast_exact.glsl"
+#else
+#include "lookup.glsl"
+#endif
 
 uniform sampler2D u_entry_depth;
 uniform isampler2D u_entry;
@@ -36,6 +44,26 @@ uniform isampler2D u_last_in;
 // An entry face whose unit normal meets the ray's direction at a cosine below this is
 // taken as seen edge-on.
 #define GRAZING 1.0e-4
+
+#if INTEGRATION_EXACT
+// The transfer function's interval of the last segment's end: the next segment mostly
+// starts in it (the scalar is continuous), which spares its search.
+TFInterval tf_last;
+bool tf_known = false;
+
+// The segment from scalar s0 to s1 over world length len, exactly (raycast_exact.glsl).
+vec4 segment(float s0, float s1, float len) {
+    TFInterval a = tf_known && tf_holds(tf_last, s0) ? tf_last : tf_interval(s0);
+    TFInterval b = tf_holds(a, s1) ? a : tf_interval(s1);
+    tf_last = b;
+    tf_known = true;
+    return integrate_piece(s0, tf_in(a, s0), a.i, s1, tf_in(b, s1), b.i, len);
+}
+#else
+vec4 segment(float s0, float s1, float len) {
+    return lookup_segment(s0, s1, len);
+}
+#endif
 
 uniform int u_max_steps;      // bound on tets per ray and layer (a walk caught by rounding)
 uniform float u_opaque;       // stop once alpha reaches this (early ray termination)
@@ -146,7 +174,7 @@ void main() {
         acc.z += 1.0;
         if (at_far) break;
 #else
-        if (shown) acc += (1.0 - acc.a) * lookup_segment(s_a, s_out, (t_out - t_a) * per_t);
+        if (shown) acc += (1.0 - acc.a) * segment(s_a, s_out, (t_out - t_a) * per_t);
         if (at_far || acc.a >= u_opaque) break;
 #endif
         int mate = tet_mates(tet)[exit_face];

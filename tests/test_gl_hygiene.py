@@ -24,6 +24,18 @@ def test_every_shader_variant_compiles():
             r._program(kind, PERSPECTIVE_CORRECT=1)
         for kind in ("classify_vtk", "vtk_pt"):  # VTK parity (optics="vtk")
             r._program(kind)
+        # The ray window (clip planes, a surface's ray limit) in both methods, the surfaces,
+        # and tet marching without a table.
+        for clip, limit, near in itertools.product((0, 3), (0, 1), (0, 1)):
+            r._program("tet", PERSPECTIVE_CORRECT=1, TABLE_NORMALIZED=1, NEAR_CROSSING=near, CLIP_RANGE=1,
+                       CLIP_PLANES=clip, RAY_LIMIT=limit, PERSPECTIVE=1)
+        for clip, limit, exact, extent, persp in itertools.product((0, 6), (0, 1), (0, 1), (0, 1), (0, 1)):
+            if exact and extent:
+                continue
+            r._program("march", PERSPECTIVE=persp, CELL_DATA=0, FIRST=1, TABLE_NORMALIZED=1, EXTENT=extent,
+                       INTEGRATION_EXACT=exact, CLIP_PLANES=clip, RAY_LIMIT=limit)
+        for persp in (0, 1):
+            r._program("surface", PERSPECTIVE=persp)
         assert r.ctx.error == "GL_NO_ERROR"
 
 

@@ -45,8 +45,8 @@ _SAMPLE = 4096
 #: Settings only projected tetrahedra implement: VTK parity (VTK's projected tetrahedra,
 #: tetvr.gl.vtkpt), screen-linear interpolation and an 8-bit compositing target.
 PROJECTED_ONLY = ("optics='vtk'", "framebuffer='uint8'", "perspective_correct=False")
-#: Settings only the ray caster implements (none so far).
-RAYMARCH_ONLY: tuple[str, ...] = ()
+#: Settings only the ray caster implements.
+RAYMARCH_ONLY: tuple[str, ...] = ("integration='exact'",)
 
 
 def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Camera | None" = None,
@@ -76,6 +76,8 @@ def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Cam
     """
     if settings.method != "auto":
         return settings.method
+    if settings.integration == "exact":
+        return "raymarch"  # only tet marching integrates without the table
     if settings.optics == "vtk" or settings.framebuffer != "float32" or not settings.perspective_correct:
         return "projected"
     if mesh is not None:

@@ -27,6 +27,8 @@ TABLE_FILTERS = ("linear", "cubic")
 FRAMEBUFFERS = ("float32", "uint8")
 #: The two GPU methods (see :mod:`tetvr.method`): projected tetrahedra or tet marching.
 METHODS = ("auto", "projected", "raymarch")
+#: How a ray--tet segment is integrated: a pre-integration table lookup, or exactly.
+INTEGRATIONS = ("table", "exact")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,6 +100,14 @@ class RenderSettings:
         faster for the scene; see docs/methods.md). Both read the same table and return
         the same premultiplied image; ``sort``, ``cull`` and ``perspective_correct`` apply
         to projected tetrahedra only.
+    integration : ``"table"`` (default: each segment is one lookup in the pre-integration
+        table) or ``"exact"`` (tet marching only, ``optics="exact"``): no table; each
+        segment is cut at the transfer function's control points it crosses and every cut
+        integrated in closed form (optical depth) and by quadrature (colour), the
+        reference's model in float32 (shaders/raycast_exact.glsl, shared with the volume
+        ray caster). No table error at all, so any transfer function, spikes included, is
+        as exact as a smooth one, and a segment cut in two (sort-last bricks) integrates to
+        what the whole does; each segment costs more than a lookup (docs/methods.md).
     optics : how transfer-function opacity becomes light (:data:`tetvr.optics.OPTICS`):
         ``"exact"`` (``tau = -ln(1 - a)/u``, the default), ``"linear"`` (``tau = a/u``, the
         convention of VTK's unstructured-grid mappers, integrated exactly) or ``"vtk"``
@@ -132,10 +142,20 @@ class RenderSettings:
     cull: bool = False
     optics: Literal["exact", "linear", "vtk"] = "exact"
     method: Literal["auto", "projected", "raymarch"] = "auto"
+    integration: Literal["table", "exact"] = "table"
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
+        if self.integration not in INTEGRATIONS:
+            raise ValueError(f"integration must be one of {INTEGRATIONS}, got {self.integration!r}")
+        if self.integration == "exact":
+            if self.method == "projected":
+                raise ValueError("integration='exact' is tet marching's (method='raymarch' or 'auto'); projected "
+                                 "tetrahedra integrate through the table")
+            if self.optics != "exact":
+                raise ValueError(f"integration='exact' integrates optics='exact' (tau = -ln(1 - a)/u), got "
+                                 f"optics={self.optics!r}")
         if self.sort not in SORT_METHODS:
             raise ValueError(f"sort must be one of {SORT_METHODS}, got {self.sort!r}")
         if self.table_encoding not in TABLE_ENCODINGS:

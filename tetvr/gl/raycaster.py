@@ -37,7 +37,7 @@ from ..volume import Volume
 from .context import context_alive, create_context, describe
 from .shaders import ShaderCompileError, assemble, explain
 from .util import (_LLVMPIPE_TEXTURE_BYTES, _SOFTWARE_GL, Clock, GLOwner, check_size, clear_gl_errors,
-                   free_video_memory, gl_locked, locked, make_target, set_uniforms, table_texture)
+                   free_video_memory, gl_locked, locked, make_target, set_uniforms, table_texture, tf_points_texture)
 
 __all__ = ["Raycaster", "RaycastStats", "MODES"]
 
@@ -295,16 +295,10 @@ class Raycaster(GLOwner):
         opacity), row 1 the colour, one texel per point of the union of both maps."""
         if tf == self._tf_points_key:
             return
-        bp = tf.breakpoints
-        rgb, a = tf.evaluate(bp)
-        data = np.zeros((2, bp.shape[0], 4), np.float32)
-        data[0, :, 0], data[0, :, 1], data[1, :, :3] = bp, a, rgb
         if self._tf_points_tex is not None:
             self._tf_points_tex.release()
             self._tf_points_tex = None
-        tex = self.ctx.texture((bp.shape[0], 2), 4, data.tobytes(), dtype="f4")
-        tex.repeat_x = tex.repeat_y = False
-        self._tf_points_tex = tex
+        self._tf_points_tex = tf_points_texture(self.ctx, tf)
         self._tf_points_key = tf
 
     def _use_limits(self, t_start: ArrayLike | None, t_end: ArrayLike | None, size: tuple[int, int]) -> bool:

@@ -37,7 +37,7 @@ from .vtkpt import VTKParity, vtk_depth_order
 from .surfaces import RayWindow, SurfacePass
 from ..surface import Surface, check_surfaces
 from .util import (Clock, GLOwner, check_size, clear_gl_errors, gl_locked, locked, make_target, set_uniforms,
-                   table_texture)
+                   table_texture, tf_points_texture)
 
 __all__ = ["Renderer", "FrameStats"]
 
@@ -45,6 +45,9 @@ __all__ = ["Renderer", "FrameStats"]
 #: buffer needs 16 (the fan vertices are bound in ranges), with room for the per-tet data a
 #: shader may bind whole; on llvmpipe's 128 MiB binding this caps chunks at 2.8M tets.
 _CHUNK_BYTES_PER_TET = 48
+#: Texture unit of the transfer function's points (integration="exact"); 0-9 are taken
+#: (the table, the ray caster's records and targets, the warp, the ray limit).
+TF_POINTS_UNIT = 10
 #: One fan vertex as classify.comp writes it (common.glsl's FanVertex): uvec4(ndc.xy, exact
 #: tet, 0), then the segment; 5 per tet. The attributes of tet.vert: (name, class, format, offset).
 _FAN_VERTEX_BYTES = 32
@@ -144,6 +147,7 @@ class Renderer(GLOwner):
         self._table: PreintegrationTable | None = None  # the table in the texture
         self._table_cache: tuple[tuple[Any, ...], PreintegrationTable] | None = None  # table()'s last (key, table)
         self._table_tex: Any = None
+        self._tf_points: tuple[TransferFunction, Any] | None = None  # integration="exact": (tf, its points)
         self._targets: dict[tuple[tuple[int, int], int, str], Any] = {}
         self._clock = Clock(self.ctx, False)
         self._vaos: dict[int, Any] = {}
@@ -157,6 +161,7 @@ class Renderer(GLOwner):
         self._mesh_buffers = []
         self._targets.clear()
         self._fans = self._order = self._table_tex = self._fan_indices = self._exact_count = None
+        self._tf_points = None
         self._mesh = self._gpu_tets = None
         self._table = self._table_cache = None
         if self._marcher is not None:
@@ -174,6 +179,8 @@ class Renderer(GLOwner):
             objs += self._parity.gl_objects()
         if self._surfaces is not None:
             objs += self._surfaces.gl_objects()
+        if self._tf_points is not None:
+            objs.append(self._tf_points[1])
         objs += [o for o in (self._fans, self._order, self._table_tex, self._fan_indices, self._exact_count)
                  if o is not None]
         for fbo in self._targets.values():
@@ -511,6 +518,8 @@ class Renderer(GLOwner):
         check_view_precision(mesh, camera, size)
         if shader == "tet" and self.settings.optics == "vtk":
             return self._render_vtk(mesh, camera, tf, size, order)
+        if shader == "tet" and self.settings.integration == "exact":
+            return self._raymarch_exact(mesh, camera, tf, size, order, window)
         table = self.table(mesh, tf)
         self._use_table(table)
         self._clock.lap("table")
@@ -629,11 +638,34 @@ class Renderer(GLOwner):
     def _raymarch(self, mesh: TetMesh, camera: Camera, table: PreintegrationTable, size: tuple[int, int],
                   window: RayWindow = RayWindow()) -> NDArray[np.float32]:
         """One frame by tet marching (:mod:`tetvr.gl.raymarch`), with this renderer's table."""
-        uniforms = self._march_uniforms(mesh, camera, size)
         defines = dict(TABLE_NORMALIZED=int(table.encoding == "normalized"), TABLE_WARP=int(table.nodes is not None),
                        TABLE_CUBIC=int(self.settings.table_filter == "cubic"))
         self._table_tex.use(0)
-        image = self._march.render(mesh, camera, size, uniforms, table.gl_uniforms(), defines, self._clock, window)
+        return self._march_frame(mesh, camera, size, table.gl_uniforms(), defines, window)
+
+    def _raymarch_exact(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, size: tuple[int, int],
+                        order: NDArray[np.integer[Any]] | None, window: RayWindow) -> NDArray[np.float32]:
+        """One frame by tet marching with ``integration="exact"``: no table, the transfer
+        function's control points in a texture (shaders/tf_points.glsl)."""
+        if order is not None:
+            raise ValueError("an explicit drawing order is for projected tetrahedra; integration='exact' marches rays")
+        if not self._uses_raymarch(mesh, camera, size):  # a tangled mesh: the walk cannot follow it
+            raise ValueError("integration='exact' needs tet marching, which this mesh cannot take (tangled: cells "
+                             "overlap); use integration='table' (projected tetrahedra)")
+        if self._tf_points is None or self._tf_points[0] != tf:
+            if self._tf_points is not None:
+                self._tf_points[1].release()
+            self._tf_points = (tf, tf_points_texture(self.ctx, tf))
+        self._tf_points[1].use(TF_POINTS_UNIT)
+        self._clock.lap("table")
+        uniforms = dict(u_tf_points=TF_POINTS_UNIT, u_tf_count=int(tf.breakpoints.shape[0]),
+                        u_inv_unit_distance=1.0 / tf.unit_distance)
+        return self._march_frame(mesh, camera, size, uniforms, dict(INTEGRATION_EXACT=1), window)
+
+    def _march_frame(self, mesh: TetMesh, camera: Camera, size: tuple[int, int], table_uniforms: dict[str, Any],
+                     defines: dict[str, int], window: RayWindow) -> NDArray[np.float32]:
+        uniforms = self._march_uniforms(mesh, camera, size)
+        image = self._march.render(mesh, camera, size, uniforms, table_uniforms, defines, self._clock, window)
         err = self.ctx.error
         if err != "GL_NO_ERROR":
             raise RuntimeError(f"OpenGL error after rendering: {err}")

@@ -331,3 +331,16 @@ class Clock:
         now = time.perf_counter()
         self.laps[name] = self.laps.get(name, 0.0) + now - self.t
         self.t = now
+
+
+def tf_points_texture(ctx: Any, tf: Any) -> Any:
+    """The transfer function's control points for integration without a table
+    (shaders/tf_points.glsl): row 0 (scalar, opacity), row 1 the colour, one texel per
+    point of the union of both maps."""
+    bp = tf.breakpoints
+    rgb, a = tf.evaluate(bp)
+    data = np.zeros((2, bp.shape[0], 4), np.float32)
+    data[0, :, 0], data[0, :, 1], data[1, :, :3] = bp, a, rgb
+    tex = ctx.texture((bp.shape[0], 2), 4, data.tobytes(), dtype="f4")
+    tex.repeat_x = tex.repeat_y = False
+    return tex
