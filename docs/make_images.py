@@ -164,13 +164,20 @@ METHOD_PICTURES = {
                           "sort='mpvonc' on interlocking rings: its depth heuristic between parts fails"),
     "optics_vtk": (post_scene, RenderSettings(optics="vtk", perspective_correct=False),
                    "optics='vtk' + screen-linear: VTK's projected-tetrahedra convention"),
+    "integration": (lambda: stability("spike_tf"), RenderSettings(integration="exact"),
+                    "integration='exact' on a thin opacity spike: tet marching without the table"),
 }
 
 
-def methods(size=(160, 160)):
-    summary = {}
+def methods(size=(160, 160), only=None):
+    """One picture per METHOD_PICTURES entry (``only``: those names), its PSNRs merged into
+    docs/images/guide/methods/psnr.json."""
+    path = OUT / "methods" / "psnr.json"
+    summary = json.loads(path.read_text()) if path.is_file() else {}
     refs = {}
     for name, (make, settings, what) in METHOD_PICTURES.items():
+        if only is not None and name not in only:
+            continue
         mesh, cam, tf = make()
         key = id(make) if make not in (post_scene, close_perspective, rings) else make.__name__
         if key not in refs:
@@ -190,7 +197,7 @@ def methods(size=(160, 160)):
                 f"|default - ref| x {k}", f"|variant - ref| x {k}"],
                OUT / "methods" / f"{name}.png", suptitle=what, size_in=2.0)
         summary[name] = {"default_psnr": round(p0, 1), "variant_psnr": round(p1, 1), "magnification": k}
-    (OUT / "methods" / "psnr.json").write_text(json.dumps(summary, indent=1))
+    path.write_text(json.dumps(summary, indent=1))
     print("wrote", (OUT / "methods" / "psnr.json").relative_to(ROOT))
 
 
