@@ -214,8 +214,8 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
     n_interior = int(first.size)
     boundary_slots = np.flatnonzero(mates.reshape(-1) < 0)
     boundary_faces = tets[boundary_slots[:, None] >> 2, FACE_VERTICES[boundary_slots & 3]]
-    for arr in (boundary_slots, boundary_faces):
-        arr.setflags(write=False)
+    for out in (boundary_slots, boundary_faces):
+        out.setflags(write=False)
     convex = n_nonmanifold == 0 and _convex_boundary(boundary_slots, boundary_faces, rel, normals, offsets, cell_size)
     return FaceAdjacency(
         neighbors=neighbors,

@@ -365,7 +365,7 @@ def state_transfer_function(state: ParaViewState, *, unit_distance: float | None
                           unit_distance=u)
     tf = tf.log_scaled(color=state.log_scale, opacity=state.opacity_log_scale)
     lo, hi = state.rgb_points[0][0], state.rgb_points[-1][0]
-    color_rows = list(tf.color)
+    color_rows: list[tuple[float, ...]] = list(tf.color)
     if state.discretize and hi > lo:
         color_rows = _discretized(state, lo, hi)
     eps = 1e-9 * max(abs(hi - lo), abs(hi), abs(lo), 1e-300)
@@ -373,7 +373,7 @@ def state_transfer_function(state: ParaViewState, *, unit_distance: float | None
         color_rows.insert(0, (color_rows[0][0] - eps, *_eight_bit(state.below_range_color, state.discretize)))
     if state.above_range_color is not None:
         color_rows.append((color_rows[-1][0] + eps, *_eight_bit(state.above_range_color, state.discretize)))
-    return dataclasses.replace(tf, color=tuple(color_rows))
+    return dataclasses.replace(tf, color=tuple(color_rows))  # type: ignore[arg-type]  # rows of 4, built above
 
 
 def _ascending(rows: Any) -> tuple[tuple[float, ...], ...]:

@@ -304,6 +304,7 @@ class Renderer(GLOwner):
                 # (tet.frag's exact segments read the tets buffer): without this wait the
                 # previous chunk's near-plane fragments read this chunk's cells.
                 self.ctx.finish()
+            assert self._gpu_tets is not None  # set with the mesh's buffers
             self._mesh_buffers[1].write(np.ascontiguousarray(self._gpu_tets[ids], dtype=np.int32).tobytes())
             self._clock.lap("order_upload")
             yield int(ids.shape[0])
@@ -669,7 +670,7 @@ class Renderer(GLOwner):
         err = self.ctx.error
         if err != "GL_NO_ERROR":
             raise RuntimeError(f"OpenGL error after rendering: {err}")
-        self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, **self._clock.laps)
+        self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, **self._clock.laps)  # type: ignore[arg-type]
         return image
 
     @gl_locked

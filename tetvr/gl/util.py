@@ -189,7 +189,7 @@ def free_video_memory(ctx: Any) -> int | None:
     ``GL_ATI_meminfo``), else None. Read with ``glGetIntegerv``, which moderngl does not
     expose, from the GL library: ``ctx`` must be current (as it is during a frame); with
     no context current the call does nothing and the answer is None."""
-    extensions = getattr(ctx, "extensions", set())
+    extensions: set[str] = getattr(ctx, "extensions", set())
     if "GL_NVX_gpu_memory_info" in extensions:
         pname = 0x9049  # GL_GPU_MEMORY_INFO_CURRENT_AVAILABLE_VIDMEM_NVX, KiB
     elif "GL_ATI_meminfo" in extensions:
