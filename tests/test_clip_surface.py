@@ -327,20 +327,25 @@ def _write_obj(path, surface: Surface) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
+def _cube_and_ball(folder):
+    """cube.vtu and ball.obj (a sphere in its middle) in ``folder``; the cube's bounds."""
+    import meshio
+
+    mesh = synthetic.cube(3)
+    meshio.write(folder / "cube.vtu", meshio.Mesh(mesh.points, [("tetra", mesh.tets)], point_data={"s": mesh.scalars}))
+    lo, hi = mesh.bounds
+    _write_obj(folder / "ball.obj", sphere(0.5 * (lo + hi), 0.2 * float((hi - lo).max()), n=6))
+    return lo, hi
+
+
 def test_a_scene_with_clip_and_surfaces_round_trips_and_renders(tmp_path):
     import json
-
-    import meshio
 
     from tetvr.cli import main
     from tetvr.scene import load_scene
 
-    mesh = synthetic.cube(3)
-    meshio.write(tmp_path / "cube.vtu", meshio.Mesh(mesh.points, [("tetra", mesh.tets)],
-                                                    point_data={"s": mesh.scalars}))
-    lo, hi = mesh.bounds
+    lo, hi = _cube_and_ball(tmp_path)
     c = 0.5 * (lo + hi)
-    _write_obj(tmp_path / "ball.obj", sphere(c, 0.2 * float((hi - lo).max()), n=6))
     spec = {"mesh": "cube.vtu", "size": [24, 24], "clip": {"plane": {"origin": c.tolist(), "normal": [1, 0, 0]}},
             "surfaces": [{"path": "ball.obj", "color": [1, 0, 0], "smooth": True}]}
     (tmp_path / "scene.json").write_text(json.dumps(spec))
@@ -361,16 +366,10 @@ def test_a_scene_with_clip_and_surfaces_round_trips_and_renders(tmp_path):
 
 
 def test_cli_clip_and_surface_options(tmp_path):
-    import meshio
-
     from tetvr.cli import main
 
-    mesh = synthetic.cube(3)
-    meshio.write(tmp_path / "cube.vtu", meshio.Mesh(mesh.points, [("tetra", mesh.tets)],
-                                                    point_data={"s": mesh.scalars}))
-    lo, hi = mesh.bounds
+    lo, hi = _cube_and_ball(tmp_path)
     c = 0.5 * (lo + hi)
-    _write_obj(tmp_path / "ball.obj", sphere(c, 0.2 * float((hi - lo).max()), n=6))
     args = ["render", str(tmp_path / "cube.vtu"), "--reference", "--size", "20x20", "--no-annotations"]
     assert main(args + ["-o", str(tmp_path / "a.png"), "--npy", str(tmp_path / "a.npy")]) == 0
     assert main(args + ["-o", str(tmp_path / "b.png"), "--npy", str(tmp_path / "b.npy"),

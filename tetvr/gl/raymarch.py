@@ -161,17 +161,11 @@ class Marcher:
 
     # ---- per size ----
     def _target(self, size: tuple[int, int]) -> dict[str, Any]:
-        t = self._targets.get(size)
-        if t is not None:
-            return t
-        if len(self._targets) >= 2:
-            # Bind the default framebuffer first: deleting the bound one leaves GL pointing
-            # at a dead name (INVALID_OPERATION at the next framebuffer).
-            self.ctx.detect_framebuffer(0).use()
-            for old in self._targets.values():
-                for name in sorted(old, key=lambda n: "fbo" not in n):  # framebuffers first
-                    old[name].release()
-            self._targets.clear()
+        from .util import cached_targets
+
+        return cached_targets(self.ctx, self._targets, size, self._make_target)
+
+    def _make_target(self, size: tuple[int, int]) -> dict[str, Any]:
         ctx = self.ctx
         t = {"entry": ctx.texture(size, 1, dtype="i4"), "depth": ctx.depth_texture(size)}
         t["depth"].compare_func = ""
@@ -185,7 +179,6 @@ class Marcher:
         for name, tex in t.items():
             if "fbo" not in name:
                 tex.filter = (_NEAREST, _NEAREST)
-        self._targets[size] = t
         return t
 
     # ---- the frame ----

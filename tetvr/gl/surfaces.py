@@ -119,22 +119,17 @@ class SurfacePass:
         self._key = key
 
     def _target(self, size: tuple[int, int]) -> dict[str, Any]:
-        t = self._targets.get(size)
-        if t is not None:
-            return t
-        if len(self._targets) >= 2:
-            self.ctx.detect_framebuffer(0).use()
-            for old in self._targets.values():
-                for name in ("fbo", "depth_fbo", "color", "depth", "zbuffer"):
-                    old[name].release()
-            self._targets.clear()
+        from .util import cached_targets
+
+        return cached_targets(self.ctx, self._targets, size, self._make_target)
+
+    def _make_target(self, size: tuple[int, int]) -> dict[str, Any]:
         ctx = self.ctx
         t = {"color": ctx.texture(size, 4, dtype="f4"), "depth": ctx.texture(size, 1, dtype="f4"),
              "zbuffer": ctx.depth_texture(size)}
         t["depth"].filter = (_NEAREST, _NEAREST)
         t["fbo"] = ctx.framebuffer(color_attachments=[t["color"], t["depth"]], depth_attachment=t["zbuffer"])
         t["depth_fbo"] = ctx.framebuffer(color_attachments=[t["depth"]])
-        self._targets[size] = t
         return t
 
     # ---- the frame ----

@@ -344,3 +344,28 @@ def tf_points_texture(ctx: Any, tf: Any) -> Any:
     tex = ctx.texture((bp.shape[0], 2), 4, data.tobytes(), dtype="f4")
     tex.repeat_x = tex.repeat_y = False
     return tex
+
+
+def cached_targets(ctx: Any, targets: dict[Any, dict[str, Any]], size: tuple[int, int],
+                   make: Any, keep: int = 2) -> dict[str, Any]:
+    """The render-target set of this size from ``targets``, made by ``make(size)`` on first
+    use; beyond ``keep`` sizes the old sets are released first (a window being resized
+    would otherwise keep one set per size it passed through)."""
+    t = targets.get(size)
+    if t is None:
+        if len(targets) >= keep:
+            drop_targets(ctx, targets)
+        t = targets[size] = make(size)
+    return t
+
+
+def drop_targets(ctx: Any, targets: dict[Any, dict[str, Any]]) -> None:
+    """Release cached render-target sets (each a dict of name -> GL object) and forget them.
+    The default framebuffer is bound first (deleting the bound one leaves GL pointing at a
+    dead name: INVALID_OPERATION at the next framebuffer), and each set's framebuffers
+    (names holding "fbo") go before their attachments."""
+    ctx.detect_framebuffer(0).use()
+    for old in targets.values():
+        for name in sorted(old, key=lambda n: "fbo" not in n):
+            old[name].release()
+    targets.clear()
