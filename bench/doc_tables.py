@@ -347,7 +347,49 @@ def viewer_latency() -> str:
             f"Mesa llvmpipe, {load} ({r['date']}, `bench/results/viewer.json`).\n\n" + "\n".join(rows))
 
 
-TABLES: dict[str, Callable[[], str]] = {"parity_anatomy": parity_anatomy, "parity_vs_exact": parity_vs_exact,
+#: The stability table's columns: speed_accuracy.py variant -> heading.
+_STABILITY_COLUMNS = {"projected tetrahedra": "projected tetrahedra",
+                      "tet marching, no table (integration exact)": "tet marching, no table",
+                      "uniform table nodes": "uniform table nodes",
+                      "screen-linear interpolation": "screen-linear interpolation",
+                      "premultiplied table": "premultiplied table", "uint8 framebuffer": "uint8 framebuffer",
+                      "N=64": "N=64", "sort=centroid": "sort=centroid", "sort=none": "sort=none"}
+
+
+def stability_cases() -> str:
+    """docs/limits.md: every stability case (tetvr.stability) with the default settings
+    (PSNR, largest per-pixel error, pixels beyond 1/255) and with one setting changed (PSNR),
+    from bench/speed_accuracy.py."""
+    import warnings
+
+    sys.path.insert(0, str(ROOT))
+    from tetvr.stability import CASES, case
+
+    r = _load("speed_accuracy.json")
+
+    def db(rec: dict[str, Any] | None) -> str:
+        if rec is None or rec.get("psnr") is None:
+            return "–"
+        return "exact" if rec["psnr"] >= 150 else f"{rec['psnr']:.1f}"
+
+    cols = [c for c in _STABILITY_COLUMNS if any(c in v for v in r["stability"].values())]
+    rows = ["| case | what | default: PSNR | max error | % pixels > 1/255 | "
+            + " | ".join(_STABILITY_COLUMNS[c] for c in cols) + " |",
+            "|---|---|---:|---:|---:|" + "---:|" * len(cols)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for name, rec in sorted(r["stability"].items()):
+            what = case(name).what if name in CASES else ""
+            d = rec["default"]
+            rows.append(f"| `{name}` | {what} | {db(d)} | {d['max_error']:.1e} | {d['pct_over_1_255']:.2f} | "
+                        + " | ".join(db(rec.get(c)) for c in cols) + " |")
+    return (f"PSNR (dB, premultiplied RGB) against the exact reference at 96x96 (speed_accuracy.py renders "
+            f"the stability cases at that size), the default settings and one "
+            f"setting changed per column ({r['created']}, `bench/results/speed_accuracy.json`).\n\n"
+            + "\n".join(rows))
+
+
+TABLES: dict[str, Callable[[], str]] = {"parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
                                         "compare_demo": compare_demo,
                                         "viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages,
                                         "volume_accuracy": volume_accuracy,
