@@ -4,7 +4,6 @@
     python docs/make_images.py            # everything, ~1 minute on llvmpipe
     python docs/make_images.py methods    # one group: quickstart, defaults, methods, fusion, limits, interactive,
                                           # clipping
-    python docs/make_images.py tables     # print docs/limits.md's table from bench/results/
 
 Every picture under docs/images/guide/ comes from this script; docs/images/demo.png from
 `tetvr demo -o docs/images/demo.png`; docs/images/fusion/ from
@@ -256,31 +255,6 @@ def interactive():
            suptitle="tetvr animate demo.json --orbit 6 (frames 0..5)")
 
 
-def tables():
-    """Print the Markdown tables of docs/limits.md from bench/results/speed_accuracy.json."""
-    import warnings as _w
-
-    path = ROOT / "bench" / "results" / "speed_accuracy.json"
-    if not path.is_file():
-        print(f"no {path}: run python bench/speed_accuracy.py first")
-        return
-    data = json.loads(path.read_text())
-    cols = ["default", "uniform table nodes", "screen-linear interpolation", "premultiplied table", "uint8 framebuffer", "N=64",
-            "sort=centroid", "sort=mpvonc", "sort=none"]
-    print(f"<!-- from bench/results/speed_accuracy.json, {data['created']}, {data['size'][0]}x{data['size'][1]} px -->")
-    print("| case | what | " + " | ".join(cols) + " |")
-    print("|---|---|" + "---:|" * len(cols))
-    with _w.catch_warnings():
-        _w.simplefilter("ignore")
-        for name, rec in sorted(data["stability"].items()):
-            what = case(name).what if name in CASES else ""
-            cells = []
-            for c in cols:
-                p = rec.get(c, {}).get("psnr")
-                cells.append("—" if p is None else ("exact" if p >= 150 else f"{p:.1f}"))
-            print(f"| `{name}` | {what} | " + " | ".join(cells) + " |")
-
-
 def clipping(size=(240, 180)):
     """Clip planes, a clip box and an opaque surface in the demo's post, each against the reference."""
     from tetvr import Clip, Surface
@@ -321,7 +295,7 @@ def clipping(size=(240, 180)):
 
 
 GROUPS = {"quickstart": quickstart, "defaults": defaults, "methods": methods, "fusion": fusion, "limits": limits, "interactive": interactive,
-          "clipping": clipping, "tables": tables}
+          "clipping": clipping}
 
 
 def main(argv=None) -> int:
