@@ -650,9 +650,10 @@ class Renderer(GLOwner):
         function's control points in a texture (shaders/tf_points.glsl)."""
         if order is not None:
             raise ValueError("an explicit drawing order is for projected tetrahedra; integration='exact' marches rays")
-        if not self._uses_raymarch(mesh, camera, size):  # a tangled mesh: the walk cannot follow it
-            raise ValueError("integration='exact' needs tet marching, which this mesh cannot take (tangled: cells "
-                             "overlap); use integration='table' (projected tetrahedra)")
+        if not self._uses_raymarch(mesh, camera, size):  # records beyond one texture of this GL
+            raise MemoryError(f"integration='exact' needs tet marching, whose records of {mesh.n_tets} tets do not "
+                              f"fit one texture of this GL; use integration='table' (projected tetrahedra draw in "
+                              f"chunks) or split the mesh into bricks")
         if self._tf_points is None or self._tf_points[0] != tf:
             if self._tf_points is not None:
                 self._tf_points[1].release()
