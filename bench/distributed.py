@@ -199,7 +199,8 @@ def accuracy(args: argparse.Namespace) -> dict:
     if (common.TETS_DATA / "bluntfin_tets.vtu").is_file():
         meshes["bluntfin"] = lambda: common.load_quiet(common.TETS_DATA / "bluntfin_tets.vtu", "Density")
     size = (64, 64)
-    out: dict = {"size": list(size), "cases": []}
+    out: dict = {"size": list(size), "cases": [],
+                 "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
     with cluster_client(n_workers=2) as c:
         for name, make in meshes.items():
             mesh = make()
@@ -213,8 +214,10 @@ def accuracy(args: argparse.Namespace) -> dict:
                      "inside": Camera(position=tuple(eye), focal_point=tuple(eye - (0.4, 0.2, 0.3)), view_angle=70.0,
                                       clipping_range=(0.005 * diag, 5 * diag))}
             refs = {v: render_reference(mesh, cam, tf, size) for v, cam in views.items()}
-            for method in ("auto", "projected"):
-                settings = RenderSettings(method=method)
+            for method in ("auto", "projected", "exact"):
+                # "exact": tet marching without the table (integration="exact").
+                settings = (RenderSettings(integration="exact") if method == "exact"
+                            else RenderSettings(method=method))
                 with Renderer(settings) as r:
                     wholes = {v: r.render(mesh, cam, tf, size=size) for v, cam in views.items()}
                 for p in (2, 4, 8):
@@ -227,7 +230,9 @@ def accuracy(args: argparse.Namespace) -> dict:
                             "resolved": bricks.settings_for(settings, cam, size).method, "cells_cut": tree.n_cut,
                             "max_abs_diff": float(np.abs(img - wholes[v]).max()),
                             "whole_max_err_vs_ref": float(np.abs(wholes[v] - refs[v]).max()),
-                            "psnr_whole": psnr(wholes[v], refs[v]), "psnr_bricks": psnr(img, refs[v])})
+                            "psnr_whole": psnr(wholes[v], refs[v]), "psnr_bricks": psnr(img, refs[v]),
+                            "pixels_over_1e-5": int((np.abs(img - wholes[v]).max(axis=-1) > 1e-5).sum()),
+                            "pixels_over_1_255": int((np.abs(img - wholes[v]).max(axis=-1) > 1 / 255).sum())})
                     bricks.release()
                     worst = max((x for x in out["cases"] if x["mesh"] == name and x["P"] == p
                                  and x["method"] == method), key=lambda x: x["max_abs_diff"])
@@ -285,10 +290,11 @@ def main() -> None:
         import json
 
         result = json.loads(path.read_text())
-    result.update({"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-                   "machine": common.machine()})
-    load = {"start": os.getloadavg()}  # other jobs on the machine: what the seconds shared it with
     only = args.only.split(",")
+    result["machine"] = common.machine()
+    if set(only) - {"accuracy"}:  # the date of the timed parts (accuracy carries its own)
+        result["date"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    load = {"start": os.getloadavg()}  # other jobs on the machine: what the seconds shared it with
     if "series" in only:
         result["series"] = series(args)
     if "composite" in only:
@@ -302,7 +308,8 @@ def main() -> None:
     if "accuracy" in only:
         result["accuracy"] = accuracy(args)
     load["end"] = os.getloadavg()
-    result["load_average_1_5_15_min"] = load
+    if set(only) - {"accuracy"}:  # the load the timed parts shared the machine with
+        result["load_average_1_5_15_min"] = load
     common.write_json(path, result)
     if all(k in result for k in ("series", "bricks")):
         chart(result, path.with_suffix(".png"))
