@@ -130,12 +130,11 @@ def test_gpu_bytes_counts_what_the_renderer_holds():
     with Renderer(RenderSettings(table_scalar_bins=32, table_thickness_slices=4, method="raymarch")) as r:
         r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(16, 8))
         # records: one row of up to 4096 tets (5 RGBA32F texels each) and 48 tets (8192 per row of
-        # RGBA32I mates), boundary faces (3 corners: each with the face's 3 corners, 9 floats,
-        # + 1 int), table, targets
+        # RGBA32I mates), boundary faces (3 corners: 3 floats + 1 int), table, targets
         # (entry id + depth, and two sets of colour, state and last entry)
         n_faces = 6 * 4 * 2  # two triangles on each of a 2x2 grid of squares per cube side
         tets_per_row = min(r.ctx.info["GL_MAX_TEXTURE_SIZE"] // 5, 4096)
-        expected = (tets_per_row * 5 * 16 + 8192 * 16 + n_faces * 3 * 40 + table + 16 * 8 * (4 + 4 + 2 * (16 + 8 + 4)))
+        expected = (tets_per_row * 5 * 16 + 8192 * 16 + n_faces * 3 * 16 + table + 16 * 8 * (4 + 4 + 2 * (16 + 8 + 4)))
         assert r.gpu_bytes() == expected
 
 
