@@ -8,9 +8,6 @@
 // t lies in the clipping range and, when PEEL is 1 (a later layer of a non-convex mesh), if
 // the ray left the mesh in the last march pass and t is not before where it left (minus a
 // rounding tolerance) nor the face it entered by last.
-// The face is drawn slightly grown (march_entry.vert): the ray meets it if its point on
-// the face's plane lies inside the tet's other three planes (within the rounding
-// tolerance), decided here in float32 rather than by the rasteriser's snapped coverage.
 // Out: f_entry: 4 * tet + k for a face, -2 - tet for a cut cell; gl_FragDepth: t mapped to
 // [0, 1] over the clipping range.
 
@@ -42,12 +39,6 @@ void main() {
     if (dot(plane.xyz, d) >= 0.0) discard;  // faces away: rays leave the mesh here
     float t = plane_t(plane, o, d);
     if (t < u_near || t >= u_far) discard;
-    vec3 p = o + t * d;
-    for (int k = 0; k < 4; ++k) {
-        if (k == (v_id & 3)) continue;
-        vec4 other = face_plane(tet, k);
-        if (dot(other.xyz, p) + other.w > u_tolerance) discard;  // outside the face
-    }
 #if PEEL
     ivec2 px = ivec2(gl_FragCoord.xy);
     vec2 state = texelFetch(u_state, px, 0).xy;

@@ -47,10 +47,6 @@ OPAQUE_REMAINDER = 2.0**-20
 #: GL_NEAREST: records and targets are read with texelFetch, never filtered (the value of
 #: moderngl.NEAREST, written here so that importing this module imports no moderngl).
 _NEAREST = 0x2600
-#: GL_DEPTH_CLAMP: the boundary faces are drawn unclipped by the near and far planes
-#: (march_entry.frag keeps t in the clipping range exactly): a face GL cut at the near
-#: plane would get a new, ungrown edge there, snapped like any other.
-_DEPTH_CLAMP = 0x864F
 
 
 def _layout(max_texture_size: int) -> tuple[int, int]:
@@ -148,11 +144,7 @@ class Marcher:
         for tex in (planes, mates_tex):
             tex.filter = (_NEAREST, _NEAREST)
         self._textures = [planes, mates_tex]
-        tri = np.ascontiguousarray(rec.boundary_triangles, dtype=np.float32)  # (F, 3, 3)
-        # Each corner with the triangle's other two, in order (march_entry.vert grows the
-        # triangle by a fraction of a pixel, which needs all three).
-        corners = np.concatenate([tri, np.roll(tri, -1, axis=1), np.roll(tri, 1, axis=1)], axis=2)  # (F, 3, 9)
-        pos = self.ctx.buffer(np.ascontiguousarray(corners, dtype=np.float32).tobytes())
+        pos = self.ctx.buffer(np.ascontiguousarray(rec.boundary_triangles, dtype=np.float32).tobytes())
         slots = self.ctx.buffer(np.repeat(rec.boundary_slots.astype(np.int32), 3).tobytes())
         self._faces = [pos, slots]
         self._tets_per_row, self._mates_width = tets_per_row, mates_width
@@ -221,7 +213,6 @@ class Marcher:
         t["entry_fbo"].use()
         t["entry_fbo"].clear(depth=1.0)
         ctx.enable(moderngl.DEPTH_TEST)
-        ctx.enable_direct(_DEPTH_CLAMP)
         ctx.depth_func = "<"
         face_prog = self.owner._program("march_entry", PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=0)
         self._set(face_prog, common)
@@ -239,7 +230,6 @@ class Marcher:
         for b in near_buffers:
             b.release()
         ctx.disable(moderngl.DEPTH_TEST)
-        ctx.disable_direct(_DEPTH_CLAMP)
         clock.lap("entry")
 
         march_defines = dict(defines, PERSPECTIVE=perspective, CELL_DATA=int(mesh.cell_data),
@@ -271,13 +261,11 @@ class Marcher:
             t["entry_fbo"].use()
             t["entry_fbo"].clear(depth=1.0)
             ctx.enable(moderngl.DEPTH_TEST)
-            ctx.enable_direct(_DEPTH_CLAMP)
             if self._query is None:
                 self._query = ctx.query(samples=True)
             with self._query:
                 self._faces_vao(peel).render(moderngl.TRIANGLES)
             ctx.disable(moderngl.DEPTH_TEST)
-            ctx.disable_direct(_DEPTH_CLAMP)
             clock.lap("entry")
             if self._query.samples == 0:
                 break
@@ -297,7 +285,7 @@ class Marcher:
         vao = self._vaos.get(id(prog))
         if vao is None:
             vao = self._vaos[id(prog)] = self.ctx.vertex_array(
-                prog, [(self._faces[0], "3f 3f 3f", "in_pos", "in_next", "in_prev"), (self._faces[1], "1i", "in_id")])
+                prog, [(self._faces[0], "3f", "in_pos"), (self._faces[1], "1i", "in_id")])
         return vao
 
     def _fullscreen(self, prog: Any) -> None:
