@@ -98,7 +98,9 @@ class SurfacePass:
 
     # ---- per surface set ----
     def _upload(self, surfaces: Sequence[Surface], origin: NDArray[np.float64]) -> None:
-        key = (tuple(id(s) for s in surfaces), tuple(origin.tolist()))
+        # The surfaces themselves, held (Surface compares by identity): ids of dropped
+        # objects are reused, and a new surface must not pass for the old one.
+        key = (tuple(surfaces), tuple(origin.tolist()))
         if key == self._key:
             return
         rows = []
