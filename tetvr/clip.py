@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .camera import Camera
 
-__all__ = ["Clip", "MAX_CLIP_PLANES", "ray_window"]
+__all__ = ["Clip", "MAX_CLIP_PLANES", "check_clip", "ray_window"]
 
 #: Most half-spaces in one clip (a box and two planes); each costs a few multiply-adds
 #: per fragment, compiled in only when a clip is given.
@@ -154,6 +154,13 @@ class Clip:
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         p = np.asarray(self.planes)
         return np.all(pts @ p[:, :3].T + p[:, 3] >= 0, axis=1)  # type: ignore[no-any-return]
+
+
+def check_clip(clip: Any) -> "Clip | None":
+    """``clip`` itself, if it is a :class:`Clip` or None; else a TypeError naming its type."""
+    if clip is not None and not isinstance(clip, Clip):
+        raise TypeError(f"clip must be a tetvr.Clip or None, got {type(clip).__name__}")
+    return clip
 
 
 def ray_window(planes_eye: NDArray[np.float64], x: NDArray[np.float64], y: NDArray[np.float64], *,

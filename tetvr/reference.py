@@ -60,7 +60,7 @@ from numpy.typing import NDArray
 from ._checks import check_instances
 from .adjacency import FACE_VERTICES
 from .camera import Camera
-from .clip import Clip, ray_window
+from .clip import Clip, check_clip, ray_window
 from .image import check_memory, image_size
 from .mesh import TetMesh
 from .optics import _SUB_THETA, OPTICS, integrate_linear_pieces, integrate_pieces, piece_optical_depth, vtk_segments
@@ -663,9 +663,7 @@ def render_reference(
     check_unit_distance(tf.unit_distance, "the transfer function's unit_distance")
     # Up front, not at the first allocation: a 100000 x 100000 image needs 600 GiB.
     check_memory(width * height * _BYTES_PER_PIXEL, f"a {width}x{height} reference image")
-    if clip is not None and not isinstance(clip, Clip):
-        raise TypeError(f"clip must be a tetvr.Clip or None, got {type(clip).__name__}")
-    surfaces = check_surfaces(surfaces)
+    clip, surfaces = check_clip(clip), check_surfaces(surfaces)
     rays = _EyeRays.from_camera(camera, width, height)
     hit_t = hit_rgb = None
     if clip is not None or surfaces:

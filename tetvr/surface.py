@@ -204,12 +204,21 @@ def surface_hits(surfaces: Sequence[Surface], camera: Camera, size: tuple[int, i
     near, far = camera.clipping_range
     best = np.full((height, width), np.inf)
     rgb = np.zeros((height, width, 3))
+    # Every pixel's eye-space ray and unit direction to the eye, once for all triangles.
+    x, y = np.broadcast_arrays(rays.x_col[None, :], rays.y_row[:, None])
+    if rays.parallel:
+        o = np.stack([x, y, np.zeros_like(x)], axis=-1)
+        d = np.broadcast_to(np.array([0.0, 0.0, -1.0]), o.shape)
+    else:
+        d = np.stack([x, y, -np.ones_like(x)], axis=-1)
+        o = np.zeros_like(d)
+    to_eye = -d / np.linalg.norm(d, axis=-1, keepdims=True)
     view = camera.view_matrix()
     for surf in check_surfaces(surfaces):
         corners = surf.corners @ view[:3, :3].T + view[:3, 3]  # (m, 3, 3) eye space
         normals = surf.shading_normals() @ view[:3, :3].T
         for i in range(surf.n_triangles):
-            _hit_triangle(corners[i], normals[i], surf, rays, near, far, best, rgb)
+            _hit_triangle(corners[i], normals[i], surf, rays, (o, d, to_eye), near, far, best, rgb)
     return best, rgb
 
 
@@ -220,8 +229,8 @@ def _pixel_range(coords: Float, lo_edge: float, step: float, n: int) -> tuple[in
     return max(0, int(math.floor(a)) - 1), min(n - 1, int(math.ceil(b)) + 1)
 
 
-def _hit_triangle(p: Float, nrm: Float, surf: Surface, rays: Any, near: float, far: float,
-                  best: Float, rgb: Float) -> None:
+def _hit_triangle(p: Float, nrm: Float, surf: Surface, rays: Any, pixel_rays: tuple[Float, Float, Float],
+                  near: float, far: float, best: Float, rgb: Float) -> None:
     depth = -p[:, 2]
     if depth.max() < near or depth.min() > far:
         return
@@ -243,14 +252,8 @@ def _hit_triangle(p: Float, nrm: Float, surf: Surface, rays: Any, near: float, f
         r0, r1 = _pixel_range(ys, -rays.y_row[0] - 0.5 * dy, dy, height)
         if c0 > c1 or r0 > r1:
             return
-    x = rays.x_col[c0:c1 + 1][None, :]
-    y = rays.y_row[r0:r1 + 1][:, None]
-    if rays.parallel:
-        o = np.stack(np.broadcast_arrays(x, y, np.zeros_like(x * y)), axis=-1)
-        d = np.broadcast_to(np.array([0.0, 0.0, -1.0]), o.shape)
-    else:
-        d = np.stack(np.broadcast_arrays(x, y, -np.ones_like(x * y)), axis=-1)
-        o = np.zeros_like(d)
+    box = (slice(r0, r1 + 1), slice(c0, c1 + 1))
+    o, d, to_eye = (a[box] for a in pixel_rays)
     t, b1, b2 = moller_trumbore(p, o, d)
     b0 = 1.0 - b1 - b2
     hit = (b1 >= 0) & (b2 >= 0) & (b0 >= 0) & (t >= near) & (t <= far)
@@ -261,8 +264,7 @@ def _hit_triangle(p: Float, nrm: Float, surf: Surface, rays: Any, near: float, f
     n = b0[..., None] * nrm[0] + b1[..., None] * nrm[1] + b2[..., None] * nrm[2]
     with np.errstate(invalid="ignore", divide="ignore"):
         n = n / np.linalg.norm(n, axis=-1, keepdims=True)
-        v = -d / np.linalg.norm(d, axis=-1, keepdims=True)
-    ndv = np.nan_to_num(np.sum(n * v, axis=-1))
+    ndv = np.nan_to_num(np.sum(n * to_eye, axis=-1))
     col = shade(surf.color, surf.ambient, ndv)
     win[closer] = t[closer]
     rgb[r0:r1 + 1, c0:c1 + 1][closer] = col[closer]

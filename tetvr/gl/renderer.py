@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..camera import Camera
-from ..clip import Clip
+from ..clip import Clip, check_clip
 from ..mesh import TetMesh
 from ..preintegrate import PreintegrationTable, table_for
 from ..tablesize import resolve as resolve_table_size, segment_sample
@@ -488,12 +488,11 @@ class Renderer(GLOwner):
         (height, width, 4) float32 premultiplied RGBA, row 0 at the top.
         """
         self._check_alive()
-        if clip is not None and not isinstance(clip, Clip):
-            raise TypeError(f"clip must be a tetvr.Clip or None, got {type(clip).__name__}")
-        surfaces = check_surfaces(surfaces)
-        if (clip is not None or surfaces) and shader != "tet":
+        clip, surfaces = check_clip(clip), check_surfaces(surfaces)
+        windowed = clip is not None or bool(surfaces)
+        if windowed and shader != "tet":
             raise ValueError(f"clip and surfaces need shader='tet', got {shader!r}")
-        if (clip is not None or surfaces) and self.settings.optics == "vtk":
+        if windowed and self.settings.optics == "vtk":
             raise ValueError("clip and surfaces are not part of VTK parity (optics='vtk'), which reproduces VTK's "
                              "projected tetrahedra as they are; use optics 'exact' or 'linear'")
         size = self._check(size)
