@@ -129,8 +129,16 @@ void main() {
             }
         }
     } else {
+        // The ray starts inside the tet, at the near plane: it leaves by a face it points
+        // out of, so the face it points into most stands for "the face it came in by"
+        // (every tet has one: its faces' area-weighted normals sum to zero).
         tet = -2 - entry;
-        face = -1;
+        face = 0;
+        float most = 3.0e38;
+        for (int k = 0; k < 4; ++k) {
+            float den = dot(face_plane(tet, k).xyz, d);
+            if (den < most) { most = den; face = k; }
+        }
         t_in = u_near;
     }
     vec4 g = tet_scalar(tet);
@@ -143,9 +151,12 @@ void main() {
     for (int step = 0; step < u_max_steps; ++step) {
         float t_exit = 3.0e38;
         int exit_face = -1;
-        for (int k = 0; k < 4; ++k) {
-            if (k == face) continue;
-            vec4 plane = face_plane(tet, k);
+        // The three faces other than the one the ray came in by: three fetches for every
+        // lane alike (a skipped iteration would still be fetched for the other lanes).
+        ivec2 rec = tet_record(tet);
+        for (int j = 1; j < 4; ++j) {
+            int k = (face + j) & 3;
+            vec4 plane = texelFetch(u_planes, rec + ivec2(k, 0), 0);
             float den = dot(plane.xyz, d);
             if (den > 0.0) {
                 float t = -(dot(plane.xyz, o) + plane.w) / den;

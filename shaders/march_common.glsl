@@ -5,10 +5,10 @@
 // the records), eye space as in common.glsl. Ray parameter t = eye depth along the view axis
 // (the ray's direction has eye z = -1), so the clipping range compares with t directly and
 // a segment's world length is (t1 - t0) * length(d).
-// Records: u_planes (RGBA32F) holds RECORD_TEXELS texels per tet, u_tets_per_row tets a row:
+// Records: u_planes (RGBA32F) holds RECORD_TEXELS texels per tet, 2^TETS_ROW_SHIFT tets a row:
 // texels 0..3 the face planes (n, w), n . x_obj + w < 0 inside, n the outward unit normal;
-// texel 4 the scalar (g, c), s = g . x_obj + c. u_mates (RGBA32I), u_mates_width tets a
-// row: per face 4 * neighbour + its face there, -1 on the boundary.
+// texel 4 the scalar (g, c), s = g . x_obj + c. u_mates (RGBA32I), 2^MATES_ROW_SHIFT tets
+// a row: per face 4 * neighbour + its face there, -1 on the boundary.
 // Defines: PERSPECTIVE.
 
 #define RECORD_TEXELS 5
@@ -17,24 +17,30 @@
 
 uniform sampler2D u_planes;
 uniform isampler2D u_mates;
-uniform int u_tets_per_row;
-uniform int u_mates_width;
+// TETS_ROW_SHIFT, MATES_ROW_SHIFT: log2 of the tets a row of u_planes and of u_mates hold
+// (powers of two: llvmpipe has no vector integer division, a shift and a mask are one
+// instruction per lane; tetvr.gl.raymarch chooses them).
 uniform mat4 u_inv_view;    // eye -> obj
 uniform vec2 u_ray_scale;   // NDC -> eye x, y per unit depth (perspective) or eye x, y (parallel)
 uniform vec2 u_viewport;    // pixels
 uniform float u_near;
 uniform float u_far;
 
+// The texel of tet's record: add k for face k's plane, 4 for its scalar.
+ivec2 tet_record(int tet) {
+    return ivec2((tet & ((1 << TETS_ROW_SHIFT) - 1)) * RECORD_TEXELS, tet >> TETS_ROW_SHIFT);
+}
+
 vec4 face_plane(int tet, int k) {
-    return texelFetch(u_planes, ivec2((tet % u_tets_per_row) * RECORD_TEXELS + k, tet / u_tets_per_row), 0);
+    return texelFetch(u_planes, tet_record(tet) + ivec2(k, 0), 0);
 }
 
 vec4 tet_scalar(int tet) {
-    return texelFetch(u_planes, ivec2((tet % u_tets_per_row) * RECORD_TEXELS + 4, tet / u_tets_per_row), 0);
+    return texelFetch(u_planes, tet_record(tet) + ivec2(4, 0), 0);
 }
 
 ivec4 tet_mates(int tet) {
-    return texelFetch(u_mates, ivec2(tet % u_mates_width, tet / u_mates_width), 0);
+    return texelFetch(u_mates, ivec2(tet & ((1 << MATES_ROW_SHIFT) - 1), tet >> MATES_ROW_SHIFT), 0);
 }
 
 // The ray through the centre of the pixel at window position xy, in obj space.

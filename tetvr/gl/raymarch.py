@@ -50,8 +50,13 @@ _NEAREST = 0x2600
 
 
 def _layout(max_texture_size: int) -> tuple[int, int]:
-    """Tets per row of the records texture and of the mates texture."""
-    return max(1, min(max_texture_size // RECORD_TEXELS, 4096)), min(max_texture_size, 8192)
+    """Tets per row of the records texture and of the mates texture: powers of two, so that
+    the shaders find a tet's row and column by a shift and a mask (llvmpipe has no vector
+    integer division: ``tet / n`` with n a uniform costs one scalar division per lane;
+    at 512x512 the walk measured 17 % faster on bluntfin, 41 % on combustor)."""
+    per_row = 1 << max(0, (max_texture_size // RECORD_TEXELS).bit_length() - 1)
+    mates = 1 << (max_texture_size.bit_length() - 1)
+    return min(per_row, 4096), min(mates, 8192)
 
 
 def raymarch_capacity(max_texture_size: int) -> int:
@@ -83,8 +88,7 @@ class Marcher:
         self._vaos: dict[Any, Any] = {}
         self._targets: dict[tuple[int, int], dict[str, Any]] = {}
         self._query: Any = None
-        self._tets_per_row = 1
-        self._mates_width = 1
+        self._shifts: dict[str, int] = {}
         self.last_stats = MarchStats()
 
     # ---- ownership ----
@@ -147,7 +151,8 @@ class Marcher:
         pos = self.ctx.buffer(np.ascontiguousarray(rec.boundary_triangles, dtype=np.float32).tobytes())
         slots = self.ctx.buffer(np.repeat(rec.boundary_slots.astype(np.int32), 3).tobytes())
         self._faces = [pos, slots]
-        self._tets_per_row, self._mates_width = tets_per_row, mates_width
+        self._shifts = dict(TETS_ROW_SHIFT=tets_per_row.bit_length() - 1,
+                            MATES_ROW_SHIFT=mates_width.bit_length() - 1)
         self._mesh, self._records = mesh, rec
         return rec
 
@@ -200,8 +205,7 @@ class Marcher:
         view = np.asarray(uniforms["u_view"], dtype=np.float64)
         common = dict(u_view=view, u_proj=uniforms["u_proj"], u_inv_view=np.linalg.inv(view),
                       u_ray_scale=uniforms["u_ray_scale"], u_viewport=(float(size[0]), float(size[1])),
-                      u_near=uniforms["u_near"], u_far=uniforms["u_far"], u_tets_per_row=self._tets_per_row,
-                      u_mates_width=self._mates_width, u_planes=1, u_mates=2,
+                      u_near=uniforms["u_near"], u_far=uniforms["u_far"], u_planes=1, u_mates=2,
                       u_tolerance=1e-6 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])))
         t = self._target(size)
         self._textures[0].use(1)
@@ -214,12 +218,12 @@ class Marcher:
         t["entry_fbo"].clear(depth=1.0)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.depth_func = "<"
-        face_prog = self.owner._program("march_entry", PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=0)
+        face_prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=0)
         self._set(face_prog, common)
         self._faces_vao(face_prog).render(moderngl.TRIANGLES)
         near_buffers: list[Any] = []
         if near_ids.size:
-            near_prog = self.owner._program("march_entry", PERSPECTIVE=perspective, NEAR_CELLS=1, PEEL=0)
+            near_prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=1, PEEL=0)
             self._set(near_prog, common)
             corners = rects[:, [[0, 1], [2, 1], [2, 3], [0, 1], [2, 3], [0, 3]]].astype(np.float32)  # (n, 6, 2)
             near_buffers = [ctx.buffer(corners.tobytes()),
@@ -232,7 +236,7 @@ class Marcher:
         ctx.disable(moderngl.DEPTH_TEST)
         clock.lap("entry")
 
-        march_defines = dict(defines, PERSPECTIVE=perspective, CELL_DATA=int(mesh.cell_data),
+        march_defines = dict(defines, **self._shifts, PERSPECTIVE=perspective, CELL_DATA=int(mesh.cell_data),
                              **(window.defines if window is not None else {}))
         samplers = dict(u_entry_depth=3, u_entry=4, u_color_in=5, u_state_in=6, u_last_in=7, u_state=5, u_last=7)
         steps = dict(u_max_steps=int(min(mesh.n_tets + 1, 1 << 30)), u_opaque=1.0 - OPAQUE_REMAINDER)
@@ -254,7 +258,7 @@ class Marcher:
             src, dst = dst, src
             clock.lap("march")
             # Peel: the next entry behind where each ray left the mesh, if any ray did.
-            peel = self.owner._program("march_entry", PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=1)
+            peel = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=1)
             self._set(peel, {**common, **samplers})
             t[f"state_{src}"].use(5)
             t[f"last_{src}"].use(7)
