@@ -37,10 +37,15 @@ from .adjacency import FACE_VERTICES, face_adjacency
 from .camera import Camera
 from .mesh import TetMesh
 
-__all__ = ["MarchRecords", "march_records", "near_plane_cells", "folded_faces", "RECORD_TEXELS"]
+__all__ = ["MarchRecords", "march_records", "near_plane_cells", "rim_faces", "folded_faces", "RECORD_TEXELS"]
 
 #: Texels of one tet's record in the float texture: four face planes, then the scalar.
 RECORD_TEXELS = 5
+#: A boundary face counts as seen edge-on (:func:`rim_faces`) where the rays meet its plane
+#: at a sine below this: a ray the rasteriser drops within 1/256 pixel of its edge would
+#: cross less than a quarter of a pixel's footprint before leaving through that plane
+#: at any larger sine.
+EDGE_ON_SINE = 1.0 / 64.0
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -56,6 +61,8 @@ class MarchRecords:
     boundary_slots : (F,) int64, ``4 * t + k`` of each boundary face.
     boundary_triangles : (F, 3, 3) float32, the boundary faces' corners (relative to
         ``origin``).
+    boundary_edges : (F, 3) int64, each boundary face's edges as ``i * n_points + j``
+        (point indices ``i < j``): faces sharing a key share that edge.
     origin : (3,) float64, the mesh's bounding-box centre.
     convex : the mesh fills a convex region (no ray enters twice).
     """
@@ -65,6 +72,7 @@ class MarchRecords:
     mates: NDArray[np.int32]
     boundary_slots: NDArray[np.int64]
     boundary_triangles: NDArray[np.float32]
+    boundary_edges: NDArray[np.int64]
     origin: NDArray[np.float64]
     convex: bool
 
@@ -105,9 +113,11 @@ def march_records(mesh: TetMesh) -> MarchRecords:
         scalar[:, 3] = mesh.cell_scalars
     slots = np.asarray(adj.boundary_slots, dtype=np.int64)
     corners = tets[slots // 4][np.arange(slots.shape[0])[:, None], FACE_VERTICES[slots % 4]]
+    a, b = corners, np.roll(corners, -1, axis=1)
+    edge_keys = np.minimum(a, b).astype(np.int64) * mesh.n_points + np.maximum(a, b)
     return MarchRecords(planes=planes, scalar=scalar, mates=np.ascontiguousarray(adj.mates, dtype=np.int32),
-                        boundary_slots=slots, boundary_triangles=rel[corners].astype(np.float32), origin=origin,
-                        convex=bool(adj.convex))
+                        boundary_slots=slots, boundary_triangles=rel[corners].astype(np.float32),
+                        boundary_edges=edge_keys, origin=origin, convex=bool(adj.convex))
 
 
 def folded_faces(mesh: TetMesh) -> int:
@@ -175,3 +185,50 @@ def near_plane_cells(mesh: TetMesh, camera: Camera, aspect: float) -> tuple[NDAr
             hi = np.where(cross[:, None], np.maximum(hi, ndc), hi)
     rects = np.clip(np.concatenate([lo, hi], axis=1), -1.0, 1.0)
     return ids.astype(np.int64), rects
+
+
+def rim_faces(rec: MarchRecords, camera: Camera, size: tuple[int, int]
+              ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """The boundary faces whose entries the rasteriser may miss in this view, and the NDC
+    rectangle each is drawn as, one pixel wider than its projection on every side.
+
+    A face seen edge-on (its plane through the eye, or along the view direction in
+    parallel projection) lets rays run along it, so a ray a thousandth of a pixel inside
+    the mesh next to it crosses a long chord while one just outside crosses nothing. The
+    rasteriser decides which pixel centres a face covers after snapping its corners to
+    1/256 pixel, so at the faces that share an edge with such a face it can drop a ray
+    that does enter, and the image loses the chord. These faces -- those whose plane the
+    rays meet at a sine below :data:`EDGE_ON_SINE`, and every boundary face sharing an
+    edge with one -- are drawn again as rectangles whose fragments intersect the pixel's
+    ray with the triangle itself (march_entry.frag, RIM 1), as the reference does. Faces
+    reaching behind the near plane are left to the rasteriser alone.
+
+    Returns ``(indices, rects)``: indices into ``rec.boundary_slots`` and
+    ``rects[i] = (x_lo, y_lo, x_hi, y_hi)`` in NDC, clamped to the viewport.
+    """
+    width, height = size
+    slots = rec.boundary_slots
+    planes = rec.planes[slots // 4, slots % 4].astype(np.float64)
+    tri = rec.boundary_triangles
+    view = camera.view_matrix()
+    if camera.parallel_projection:
+        sine = np.abs(planes[:, :3] @ view[2, :3])
+    else:
+        eye = np.asarray(camera.position, dtype=np.float64) - rec.origin
+        nearest = np.sqrt(((tri - eye.astype(np.float32)) ** 2).sum(axis=-1).min(axis=1)).astype(np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sine = np.abs(planes[:, :3] @ eye + planes[:, 3]) / nearest
+    edge_on = sine < EDGE_ON_SINE
+    if not edge_on.any():
+        return np.empty(0, dtype=np.int64), np.empty((0, 4))
+    idx = np.flatnonzero(edge_on | np.isin(rec.boundary_edges, rec.boundary_edges[edge_on]).any(axis=1))
+    eye_pts = (tri[idx].astype(np.float64) + rec.origin) @ view[:3, :3].T + view[:3, 3]
+    if not camera.parallel_projection:
+        ahead = (-eye_pts[..., 2]).min(axis=1) > camera.clipping_range[0]
+        idx, eye_pts = idx[ahead], eye_pts[ahead]
+    proj = camera.projection_matrix(width / height)
+    ndc = (eye_pts @ proj[:2, :3].T + proj[:2, 3]) / (eye_pts @ proj[3, :3] + proj[3, 3])[..., None]
+    pad = np.array([2.0 / width, 2.0 / height])
+    rects = np.concatenate([ndc.min(axis=1) - pad, ndc.max(axis=1) + pad], axis=1)
+    keep = (rects[:, 0] < 1) & (rects[:, 1] < 1) & (rects[:, 2] > -1) & (rects[:, 3] > -1)
+    return idx[keep].astype(np.int64), np.clip(rects[keep], -1.0, 1.0)

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..camera import Camera
-from ..marching import RECORD_TEXELS, MarchRecords, folded_faces, march_records, near_plane_cells
+from ..marching import RECORD_TEXELS, MarchRecords, folded_faces, march_records, near_plane_cells, rim_faces
 from ..mesh import TetMesh
 
 if TYPE_CHECKING:
@@ -67,12 +67,14 @@ def raymarch_capacity(max_texture_size: int) -> int:
 
 @dataclasses.dataclass(frozen=True)
 class MarchStats:
-    """Layers the last ray-cast frame needed (1 for a convex mesh) and whether rays were
-    cut off at :data:`MAX_LAYERS`."""
+    """Layers the last ray-cast frame needed (1 for a convex mesh), whether rays were
+    cut off at :data:`MAX_LAYERS`, the cells the near plane cut and the boundary faces
+    drawn again at the rim of faces seen edge-on (:func:`~tetvr.marching.rim_faces`)."""
 
     layers: int = 0
     layers_exhausted: bool = False
     n_near_cells: int = 0
+    n_rim_faces: int = 0
 
 
 class Marcher:
@@ -218,12 +220,12 @@ class Marcher:
         t["entry_fbo"].clear(depth=1.0)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.depth_func = "<"
-        face_prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=0)
+        face_prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=0, RIM=0)
         self._set(face_prog, common)
         self._faces_vao(face_prog).render(moderngl.TRIANGLES)
         near_buffers: list[Any] = []
         if near_ids.size:
-            near_prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=1, PEEL=0)
+            near_prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=1, PEEL=0, RIM=0)
             self._set(near_prog, common)
             corners = rects[:, [[0, 1], [2, 1], [2, 3], [0, 1], [2, 3], [0, 3]]].astype(np.float32)  # (n, 6, 2)
             near_buffers = [ctx.buffer(corners.tobytes()),
@@ -233,6 +235,8 @@ class Marcher:
             vao.release()
         for b in near_buffers:
             b.release()
+        rim = self._rim_buffers(rec, camera, size)
+        self._draw_rim(rim, perspective, 0, common, {})
         ctx.disable(moderngl.DEPTH_TEST)
         clock.lap("entry")
 
@@ -258,7 +262,7 @@ class Marcher:
             src, dst = dst, src
             clock.lap("march")
             # Peel: the next entry behind where each ray left the mesh, if any ray did.
-            peel = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=1)
+            peel = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=1, RIM=0)
             self._set(peel, {**common, **samplers})
             t[f"state_{src}"].use(5)
             t[f"last_{src}"].use(7)
@@ -269,16 +273,47 @@ class Marcher:
                 self._query = ctx.query(samples=True)
             with self._query:
                 self._faces_vao(peel).render(moderngl.TRIANGLES)
+                self._draw_rim(rim, perspective, 1, common, samplers)
             ctx.disable(moderngl.DEPTH_TEST)
             clock.lap("entry")
             if self._query.samples == 0:
                 break
         else:
             exhausted = True
-        self.last_stats = MarchStats(layers=layers, layers_exhausted=exhausted, n_near_cells=int(near_ids.size))
+        n_rim = rim[0].size // (6 * 2 * 4) if rim else 0
+        for b in rim:
+            b.release()
+        self.last_stats = MarchStats(layers=layers, layers_exhausted=exhausted, n_near_cells=int(near_ids.size),
+                                     n_rim_faces=n_rim)
         raw = t[f"color_{src}"].read()
         clock.lap("readback")
         return np.frombuffer(raw, dtype=np.float32).reshape(size[1], size[0], 4)[::-1].copy()
+
+    def _rim_buffers(self, rec: MarchRecords, camera: Camera, size: tuple[int, int]) -> list[Any]:
+        """This view's :func:`~tetvr.marching.rim_faces` as two vertex buffers (rectangle
+        corners, 6 a face; slot and corners per vertex), or none."""
+        idx, rects = rim_faces(rec, camera, size)
+        if idx.size == 0:
+            return []
+        corners = rects[:, [[0, 1], [2, 1], [2, 3], [0, 1], [2, 3], [0, 3]]].astype(np.float32)  # (n, 6, 2)
+        per_face = np.empty((idx.size, 6, 10), dtype=np.float32)
+        per_face[..., :9] = rec.boundary_triangles[idx].reshape(-1, 1, 9)
+        per_face[..., 9] = rec.boundary_slots[idx, None].astype(np.int32).view(np.float32)
+        return [self.ctx.buffer(corners.tobytes()), self.ctx.buffer(per_face.tobytes())]
+
+    def _draw_rim(self, rim: list[Any], perspective: int, peel: int, common: dict[str, Any],
+                  samplers: dict[str, Any]) -> None:
+        import moderngl
+
+        if not rim:
+            return
+        prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=peel,
+                                   RIM=1)
+        self._set(prog, {**common, **samplers})
+        vao = self.ctx.vertex_array(prog, [(rim[0], "2f", "in_pos"),
+                                           (rim[1], "3f 3f 3f 1i", "in_c0", "in_c1", "in_c2", "in_id")])
+        vao.render(moderngl.TRIANGLES)
+        vao.release()
 
     def _set(self, prog: Any, uniforms: dict[str, Any]) -> None:
         from .util import set_uniforms
