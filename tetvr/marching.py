@@ -60,7 +60,7 @@ class MarchRecords:
     mates : (m, 4) int32, ``4 * neighbour + k`` across each face, -1 on the boundary.
     boundary_slots : (F,) int64, ``4 * t + k`` of each boundary face.
     boundary_triangles : (F, 3, 3) float32, the boundary faces' corners (relative to
-        ``origin``).
+        ``origin``), counter-clockwise seen from outside the mesh.
     boundary_edges : (F, 3) int64, each boundary face's edges as ``i * n_points + j``
         (point indices ``i < j``): faces sharing a key share that edge.
     origin : (3,) float64, the mesh's bounding-box centre.
@@ -113,6 +113,11 @@ def march_records(mesh: TetMesh) -> MarchRecords:
         scalar[:, 3] = mesh.cell_scalars
     slots = np.asarray(adj.boundary_slots, dtype=np.int64)
     corners = tets[slots // 4][np.arange(slots.shape[0])[:, None], FACE_VERTICES[slots % 4]]
+    # Wound counter-clockwise seen from outside (the GL's front face): entry passes cull the rest.
+    tri = rel[corners]
+    inward = np.einsum("ij,ij->i", np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
+                       adj.normals[slots // 4, slots % 4]) < 0
+    corners[inward] = corners[inward][:, [0, 2, 1]]
     a, b = corners, np.roll(corners, -1, axis=1)
     edge_keys = np.minimum(a, b).astype(np.int64) * mesh.n_points + np.maximum(a, b)
     return MarchRecords(planes=planes, scalar=scalar, mates=np.ascontiguousarray(adj.mates, dtype=np.int32),

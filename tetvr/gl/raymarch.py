@@ -222,7 +222,7 @@ class Marcher:
         ctx.depth_func = "<"
         face_prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=0, RIM=0)
         self._set(face_prog, common)
-        self._faces_vao(face_prog).render(moderngl.TRIANGLES)
+        self._draw_faces(face_prog)
         near_buffers: list[Any] = []
         if near_ids.size:
             near_prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=1, PEEL=0, RIM=0)
@@ -272,7 +272,7 @@ class Marcher:
             if self._query is None:
                 self._query = ctx.query(samples=True)
             with self._query:
-                self._faces_vao(peel).render(moderngl.TRIANGLES)
+                self._draw_faces(peel)
                 self._draw_rim(rim, perspective, 1, common, samplers)
             ctx.disable(moderngl.DEPTH_TEST)
             clock.lap("entry")
@@ -319,6 +319,18 @@ class Marcher:
         from .util import set_uniforms
 
         set_uniforms(prog, **uniforms)
+
+    def _draw_faces(self, prog: Any) -> None:
+        """The boundary faces that face the eye: the GL culls the others before they are
+        rasterised (they are wound counter-clockwise seen from outside), and the shader
+        drops the few whose winding the rounding of their projection turned (faces seen
+        nearly edge-on, which :func:`~tetvr.marching.rim_faces` draws again)."""
+        import moderngl
+
+        self.ctx.front_face = "ccw"
+        self.ctx.enable(moderngl.CULL_FACE)
+        self._faces_vao(prog).render(moderngl.TRIANGLES)
+        self.ctx.disable(moderngl.CULL_FACE)
 
     def _faces_vao(self, prog: Any) -> Any:
         vao = self._vaos.get(id(prog))
