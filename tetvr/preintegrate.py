@@ -474,7 +474,6 @@ def build_table(
     # Built as [k, sf, sb] (each step of the run recurrence writes one contiguous row) and
     # stored as [k, sb, sf]; theta and alpha are symmetric in (sf, sb).
     rgb = np.zeros((n_slices, n_bins, n_bins, 3))
-    theta = np.zeros((n_slices, n_bins, n_bins))
     # Optical depth is exact from the prefix sum of the bin means (Engel 2001).
     # Scalars in units of the first bin's width (all bins' when the nodes are even).
     prefix = np.concatenate([[0.0], np.cumsum(tau_bin * width)])  # optical depth over bins < i
@@ -487,10 +486,9 @@ def build_table(
     if optics == "vtk":  # VTK's PT: the mean of the two ends, not of the segment
         mean_tau = 0.5 * (tau_node[None, :] + tau_node[:, None])
         mean_color = 0.5 * (color[None, :, :] + color[:, None, :])  # [sb, sf, 3]
-    theta[:] = thick[:, None, None] * mean_tau[None]
 
     if optics == "vtk":
-        rgb[:] = mean_color[None] * (-np.expm1(-theta))[..., None]
+        rgb[:] = mean_color[None] * (-np.expm1(-(thick[:, None, None] * mean_tau[None])))[..., None]
     else:
         # Diagonal: constant scalar, closed form.
         rgb[:, i_idx, i_idx, :] = color[None] * (-np.expm1(-thick[:, None] * tau_node[None]))[..., None]
@@ -499,10 +497,21 @@ def build_table(
             _fill_runs(rgb, color, tau_bin, thick)
         else:
             _fill_runs_uneven(rgb, color, tau_bin, width, thick)
-    alpha = -np.expm1(-theta)
-
-    table = np.zeros((n_slices + 1, n_bins, n_bins, 4))
     alpha_scale = 1.0
+    if encoding == "normalized" and dtype == "float32" and optics != "vtk":
+        # The default, slice by slice straight into float32: each slice's arrays stay in
+        # cache (the same values as the general path below, in a third of its time).
+        data: NDArray[np.generic] = np.empty((n_slices + 1, n_bins, n_bins, 4), dtype=np.float32)
+        data[..., 3] = np.minimum(mean_tau, _MAX_STORED_TAU)
+        data[0, ..., :3] = _thin_limit(color, tau_bin * width, tau_node, prefix)
+        for k in range(n_slices):
+            alpha_k = -np.expm1(-(thick[k] * mean_tau))[..., None]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                chroma = np.where(alpha_k > 1e-300, rgb[k] / alpha_k, 0.0)
+            data[k + 1, ..., :3] = np.clip(chroma, 0.0, 1.0, out=chroma).transpose(1, 0, 2)
+        return _finished(data, tf, lo, hi, thick, log_base, encoding, alpha_scale, warped, optics)
+    alpha = -np.expm1(-(thick[:, None, None] * mean_tau[None]))
+    table = np.zeros((n_slices + 1, n_bins, n_bins, 4))
     if encoding == "premultiplied":
         table[1:, ..., :3] = rgb.transpose(0, 2, 1, 3)
         table[1:, ..., 3] = alpha
@@ -516,9 +525,16 @@ def build_table(
             alpha_scale = float(max(min(mean_tau.max(), _MAX_STORED_TAU), 1e-300))
             table[..., 3] /= alpha_scale
     if dtype == "uint8":
-        data: NDArray[np.generic] = np.round(np.clip(table, 0.0, 1.0) * 255.0).astype(np.uint8)
+        data = np.round(np.clip(table, 0.0, 1.0) * 255.0).astype(np.uint8)
     else:
         data = table.astype(np.float32)
+    return _finished(data, tf, lo, hi, thick, log_base, encoding, alpha_scale, warped, optics)
+
+
+def _finished(data: NDArray[np.generic], tf: TransferFunction, lo: float, hi: float, thick: NDArray[np.float64],
+              log_base: float, encoding: str, alpha_scale: float, warped: NDArray[np.float64] | None,
+              optics: str) -> PreintegrationTable:
+    """The table of :func:`build_table`, read-only, with what its lookups need."""
     data.setflags(write=False)
     thicknesses = np.concatenate([[0.0], thick])
     optical = None
