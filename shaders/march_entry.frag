@@ -8,8 +8,9 @@
 // t lies in the clipping range and, when PEEL is 1 (a later layer of a non-convex mesh), if
 // the ray left the mesh in the last march pass and t is not before where it left (minus a
 // rounding tolerance) nor the face it entered by last. RIM 1: as NEAR_CELLS 0 for a face
-// drawn as a rectangle round its projection, whose fragments are kept only where the
-// pixel's ray meets the triangle v_c0..2 (Moller-Trumbore, float32; tetvr.marching.rim_faces).
+// drawn as a rectangle round its projection (tetvr.marching.rim_faces), whose fragments
+// are kept only where the pixel's ray, in float64, enters the triangle v_c0..2 (wound
+// counter-clockwise seen from outside; Moller-Trumbore, closed, as the reference decides).
 // Out: f_entry: 4 * tet + k for a face, -2 - tet for a cut cell; gl_FragDepth: t mapped to
 // [0, 1] over the clipping range.
 
@@ -17,9 +18,23 @@
 
 flat in int v_id;
 #if RIM
-flat in vec3 v_c0;
-flat in vec3 v_c1;
-flat in vec3 v_c2;
+flat in dvec3 v_c0;
+flat in dvec3 v_c1;
+flat in dvec3 v_c2;
+uniform dmat4 u_inv_view_d;   // u_inv_view in float64
+uniform dvec2 u_ray_scale_d;  // u_ray_scale in float64
+
+// pixel_ray in float64: a pixel centre's coordinates are exact in float32.
+void pixel_ray_d(vec2 xy, out dvec3 o_obj, out dvec3 d_obj) {
+    dvec2 r = (dvec2(xy) / dvec2(u_viewport) * 2.0LF - 1.0LF) * u_ray_scale_d;
+#if PERSPECTIVE
+    o_obj = u_inv_view_d[3].xyz;
+    d_obj = dmat3(u_inv_view_d) * dvec3(r, -1.0LF);
+#else
+    o_obj = (u_inv_view_d * dvec4(r, 0.0LF, 1.0LF)).xyz;
+    d_obj = dmat3(u_inv_view_d) * dvec3(0.0LF, 0.0LF, -1.0LF);
+#endif
+}
 #endif
 layout(location = 0) out int f_entry;
 
@@ -42,19 +57,21 @@ void main() {
     gl_FragDepth = 0.0;
 #else
 #if RIM
-    vec3 e1 = v_c1 - v_c0, e2 = v_c2 - v_c0;
-    vec3 p = cross(d, e2);
-    float det = dot(e1, p);
-    if (det == 0.0) discard;  // the ray runs in the face's plane: it enters elsewhere
-    vec3 s = o - v_c0;
-    float u = dot(s, p) / det;
-    float v = dot(d, cross(s, e1)) / det;
-    if (u < 0.0 || v < 0.0 || u + v > 1.0) discard;
-#endif
-    int tet = v_id >> 2;
-    vec4 plane = face_plane(tet, v_id & 3);
+    dvec3 od, dd;
+    pixel_ray_d(gl_FragCoord.xy, od, dd);
+    dvec3 e1 = v_c1 - v_c0, e2 = v_c2 - v_c0;
+    dvec3 p = cross(dd, e2);
+    double det = dot(e1, p);  // -d . (e1 x e2): positive where the ray enters
+    if (!(det > 0.0LF)) discard;  // faces away, or the ray runs in its plane
+    dvec3 s = od - v_c0, q = cross(s, e1);
+    double u = dot(s, p), v = dot(dd, q);
+    if (u < 0.0LF || v < 0.0LF || u + v > det) discard;
+    float t = float(dot(e2, q) / det);
+#else
+    vec4 plane = face_plane(v_id >> 2, v_id & 3);
     if (dot(plane.xyz, d) >= 0.0) discard;  // faces away: rays leave the mesh here
     float t = plane_t(plane, o, d);
+#endif
     if (t < u_near || t >= u_far) discard;
 #if PEEL
     ivec2 px = ivec2(gl_FragCoord.xy);

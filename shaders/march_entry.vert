@@ -4,7 +4,7 @@
 // faces next to faces seen edge-on (RIM 1; tetvr.marching.rim_faces).
 //
 // In:  in_pos: a boundary face corner (obj) or a rectangle corner (NDC); in_id: the face's
-//      slot 4 * tet + k, or the cut tet's id; RIM 1: in_c0..2, the face's corners (obj).
+//      slot 4 * tet + k, or the cut tet's id; RIM 1: in_c0..2, the face's corners (obj, float64).
 // Out: v_id (flat), gl_Position; RIM 1: v_c0..2 (flat).
 
 uniform mat4 u_view;   // obj -> eye
@@ -18,12 +18,12 @@ in vec3 in_pos;
 in int in_id;
 flat out int v_id;
 #if RIM
-in vec3 in_c0;
-in vec3 in_c1;
-in vec3 in_c2;
-flat out vec3 v_c0;
-flat out vec3 v_c1;
-flat out vec3 v_c2;
+in dvec3 in_c0;
+in dvec3 in_c1;
+in dvec3 in_c2;
+flat out dvec3 v_c0;
+flat out dvec3 v_c1;
+flat out dvec3 v_c2;
 #endif
 
 void main() {

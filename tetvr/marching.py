@@ -61,6 +61,8 @@ class MarchRecords:
     boundary_slots : (F,) int64, ``4 * t + k`` of each boundary face.
     boundary_triangles : (F, 3, 3) float32, the boundary faces' corners (relative to
         ``origin``), counter-clockwise seen from outside the mesh.
+    boundary_corners : (F, 3) int64, the boundary faces' corners as point indices, wound
+        as ``boundary_triangles``.
     boundary_edges : (F, 3) int64, each boundary face's edges as ``i * n_points + j``
         (point indices ``i < j``): faces sharing a key share that edge.
     origin : (3,) float64, the mesh's bounding-box centre.
@@ -72,6 +74,7 @@ class MarchRecords:
     mates: NDArray[np.int32]
     boundary_slots: NDArray[np.int64]
     boundary_triangles: NDArray[np.float32]
+    boundary_corners: NDArray[np.int64]
     boundary_edges: NDArray[np.int64]
     origin: NDArray[np.float64]
     convex: bool
@@ -122,7 +125,8 @@ def march_records(mesh: TetMesh) -> MarchRecords:
     edge_keys = np.minimum(a, b).astype(np.int64) * mesh.n_points + np.maximum(a, b)
     return MarchRecords(planes=planes, scalar=scalar, mates=np.ascontiguousarray(adj.mates, dtype=np.int32),
                         boundary_slots=slots, boundary_triangles=rel[corners].astype(np.float32),
-                        boundary_edges=edge_keys, origin=origin, convex=bool(adj.convex))
+                        boundary_corners=corners.astype(np.int64), boundary_edges=edge_keys, origin=origin,
+                        convex=bool(adj.convex))
 
 
 def folded_faces(mesh: TetMesh) -> int:
@@ -193,23 +197,28 @@ def near_plane_cells(mesh: TetMesh, camera: Camera, aspect: float) -> tuple[NDAr
 
 
 def rim_faces(rec: MarchRecords, camera: Camera, size: tuple[int, int]
-              ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    """The boundary faces whose entries the rasteriser may miss in this view, and the NDC
-    rectangle each is drawn as, one pixel wider than its projection on every side.
+              ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.bool_]]:
+    """The boundary faces whose entries are decided exactly in this view, the NDC
+    rectangle each is drawn as (one pixel wider than its projection on every side), and
+    which of them the rasteriser leaves out.
 
     A face seen edge-on (its plane through the eye, or along the view direction in
     parallel projection) lets rays run along it, so a ray a thousandth of a pixel inside
     the mesh next to it crosses a long chord while one just outside crosses nothing. The
     rasteriser decides which pixel centres a face covers after snapping its corners to
-    1/256 pixel, so at the faces that share an edge with such a face it can drop a ray
-    that does enter, and the image loses the chord. These faces -- those whose plane the
-    rays meet at a sine below :data:`EDGE_ON_SINE`, and every boundary face sharing an
-    edge with one -- are drawn again as rectangles whose fragments intersect the pixel's
-    ray with the triangle itself (march_entry.frag, RIM 1), as the reference does. Faces
-    reaching behind the near plane are left to the rasteriser alone.
+    1/256 pixel, so there it can drop a ray that enters or take one that does not. The
+    faces the rays meet at a sine below :data:`EDGE_ON_SINE` and every boundary face
+    sharing an edge with one (the *core*) are therefore entered only where the pixel's
+    ray, in float64, meets the triangle itself (march_entry.frag, RIM 1), as the
+    reference decides. The faces around the core are tested exactly as well as
+    rasterised, so that the exact and the rasterised coverage meet without a crack: a
+    ray near an edge between the core and the rest is decided exactly on both sides.
+    Faces reaching behind the near plane cannot be drawn as rectangles; they stay with
+    the rasteriser, and so do their neighbours.
 
-    Returns ``(indices, rects)``: indices into ``rec.boundary_slots`` and
-    ``rects[i] = (x_lo, y_lo, x_hi, y_hi)`` in NDC, clamped to the viewport.
+    Returns ``(indices, rects, exclusive)``: indices into ``rec.boundary_slots``,
+    ``rects[i] = (x_lo, y_lo, x_hi, y_hi)`` in NDC clamped to the viewport, and whether
+    the rasteriser leaves face ``indices[i]`` out.
     """
     width, height = size
     slots = rec.boundary_slots
@@ -225,15 +234,23 @@ def rim_faces(rec: MarchRecords, camera: Camera, size: tuple[int, int]
             sine = np.abs(planes[:, :3] @ eye + planes[:, 3]) / nearest
     edge_on = sine < EDGE_ON_SINE
     if not edge_on.any():
-        return np.empty(0, dtype=np.int64), np.empty((0, 4))
-    idx = np.flatnonzero(edge_on | np.isin(rec.boundary_edges, rec.boundary_edges[edge_on]).any(axis=1))
+        return np.empty(0, dtype=np.int64), np.empty((0, 4)), np.empty(0, dtype=bool)
+    edges = rec.boundary_edges
+    core = edge_on | np.isin(edges, edges[edge_on]).any(axis=1)
+    idx = np.flatnonzero(core | np.isin(edges, edges[core]).any(axis=1))
     eye_pts = (tri[idx].astype(np.float64) + rec.origin) @ view[:3, :3].T + view[:3, 3]
-    if not camera.parallel_projection:
+    if camera.parallel_projection:
+        ahead = np.ones(idx.size, dtype=bool)
+    else:
         ahead = (-eye_pts[..., 2]).min(axis=1) > camera.clipping_range[0]
-        idx, eye_pts = idx[ahead], eye_pts[ahead]
+    exclusive = core[idx] & ahead
+    if not ahead.all():  # a face left to the rasteriser keeps its neighbours with it
+        behind = idx[~ahead]
+        exclusive &= ~np.isin(edges[idx], edges[behind]).any(axis=1)
+    idx, eye_pts, exclusive = idx[ahead], eye_pts[ahead], exclusive[ahead]
     proj = camera.projection_matrix(width / height)
     ndc = (eye_pts @ proj[:2, :3].T + proj[:2, 3]) / (eye_pts @ proj[3, :3] + proj[3, 3])[..., None]
     pad = np.array([2.0 / width, 2.0 / height])
     rects = np.concatenate([ndc.min(axis=1) - pad, ndc.max(axis=1) + pad], axis=1)
     keep = (rects[:, 0] < 1) & (rects[:, 1] < 1) & (rects[:, 2] > -1) & (rects[:, 3] > -1)
-    return idx[keep].astype(np.int64), np.clip(rects[keep], -1.0, 1.0)
+    return idx[keep].astype(np.int64), np.clip(rects[keep], -1.0, 1.0), exclusive[keep]

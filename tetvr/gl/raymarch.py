@@ -69,7 +69,8 @@ def raymarch_capacity(max_texture_size: int) -> int:
 class MarchStats:
     """Layers the last ray-cast frame needed (1 for a convex mesh), whether rays were
     cut off at :data:`MAX_LAYERS`, the cells the near plane cut and the boundary faces
-    drawn again at the rim of faces seen edge-on (:func:`~tetvr.marching.rim_faces`)."""
+    whose entries were decided by a float64 ray-triangle test beside faces seen edge-on
+    (:func:`~tetvr.marching.rim_faces`)."""
 
     layers: int = 0
     layers_exhausted: bool = False
@@ -222,7 +223,8 @@ class Marcher:
         ctx.depth_func = "<"
         face_prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=0, RIM=0)
         self._set(face_prog, common)
-        self._draw_faces(face_prog)
+        rim = self._rim_buffers(mesh, rec, camera, size)
+        self._draw_faces(face_prog, rim)
         near_buffers: list[Any] = []
         if near_ids.size:
             near_prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=1, PEEL=0, RIM=0)
@@ -235,7 +237,6 @@ class Marcher:
             vao.release()
         for b in near_buffers:
             b.release()
-        rim = self._rim_buffers(rec, camera, size)
         self._draw_rim(rim, perspective, 0, common, {})
         ctx.disable(moderngl.DEPTH_TEST)
         clock.lap("entry")
@@ -272,7 +273,7 @@ class Marcher:
             if self._query is None:
                 self._query = ctx.query(samples=True)
             with self._query:
-                self._draw_faces(peel)
+                self._draw_faces(peel, rim)
                 self._draw_rim(rim, perspective, 1, common, samplers)
             ctx.disable(moderngl.DEPTH_TEST)
             clock.lap("entry")
@@ -281,7 +282,7 @@ class Marcher:
         else:
             exhausted = True
         n_rim = rim[0].size // (6 * 2 * 4) if rim else 0
-        for b in rim:
+        for b in rim[:4]:
             b.release()
         self.last_stats = MarchStats(layers=layers, layers_exhausted=exhausted, n_near_cells=int(near_ids.size),
                                      n_rim_faces=n_rim)
@@ -289,17 +290,24 @@ class Marcher:
         clock.lap("readback")
         return np.frombuffer(raw, dtype=np.float32).reshape(size[1], size[0], 4)[::-1].copy()
 
-    def _rim_buffers(self, rec: MarchRecords, camera: Camera, size: tuple[int, int]) -> list[Any]:
-        """This view's :func:`~tetvr.marching.rim_faces` as two vertex buffers (rectangle
-        corners, 6 a face; slot and corners per vertex), or none."""
-        idx, rects = rim_faces(rec, camera, size)
+    def _rim_buffers(self, mesh: TetMesh, rec: MarchRecords, camera: Camera,
+                     size: tuple[int, int]) -> list[Any]:
+        """This view's :func:`~tetvr.marching.rim_faces` as vertex buffers (rectangle
+        corners, 6 a face; the face's corners in float64; its slot), an index buffer of
+        the boundary faces the rasteriser draws and its length; none without rim faces."""
+        idx, rects, exclusive = rim_faces(rec, camera, size)
         if idx.size == 0:
             return []
         corners = rects[:, [[0, 1], [2, 1], [2, 3], [0, 1], [2, 3], [0, 3]]].astype(np.float32)  # (n, 6, 2)
-        per_face = np.empty((idx.size, 6, 10), dtype=np.float32)
-        per_face[..., :9] = rec.boundary_triangles[idx].reshape(-1, 1, 9)
-        per_face[..., 9] = rec.boundary_slots[idx, None].astype(np.int32).view(np.float32)
-        return [self.ctx.buffer(corners.tobytes()), self.ctx.buffer(per_face.tobytes())]
+        tri = mesh.points[rec.boundary_corners[idx]] - rec.origin  # (n, 3, 3) float64
+        per_face = np.repeat(tri.reshape(-1, 1, 9), 6, axis=1)
+        slots = np.repeat(rec.boundary_slots[idx].astype(np.int32), 6)
+        rest = np.ones(rec.boundary_slots.shape[0], dtype=bool)
+        rest[idx[exclusive]] = False
+        others = (3 * np.flatnonzero(rest)[:, None] + np.arange(3)).astype(np.uint32).reshape(-1)
+        return [self.ctx.buffer(corners.tobytes()), self.ctx.buffer(per_face.astype(np.float64).tobytes()),
+                self.ctx.buffer(slots.tobytes()), self.ctx.buffer(others.tobytes() or b"\0" * 4),
+                int(others.size)]
 
     def _draw_rim(self, rim: list[Any], perspective: int, peel: int, common: dict[str, Any],
                   samplers: dict[str, Any]) -> None:
@@ -310,8 +318,11 @@ class Marcher:
         prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=peel,
                                    RIM=1)
         self._set(prog, {**common, **samplers})
-        vao = self.ctx.vertex_array(prog, [(rim[0], "2f", "in_pos"),
-                                           (rim[1], "3f 3f 3f 1i", "in_c0", "in_c1", "in_c2", "in_id")])
+        for name, value in (("u_inv_view_d", common["u_inv_view"]), ("u_ray_scale_d", common["u_ray_scale"])):
+            if name in prog:
+                prog[name].write(np.ascontiguousarray(np.asarray(value, dtype=np.float64).T).tobytes())
+        vao = self.ctx.vertex_array(prog, [(rim[0], "2f", "in_pos"), (rim[1], "3f8 3f8 3f8", "in_c0", "in_c1", "in_c2"),
+                                           (rim[2], "1i", "in_id")])
         vao.render(moderngl.TRIANGLES)
         vao.release()
 
@@ -320,16 +331,25 @@ class Marcher:
 
         set_uniforms(prog, **uniforms)
 
-    def _draw_faces(self, prog: Any) -> None:
-        """The boundary faces that face the eye: the GL culls the others before they are
-        rasterised (they are wound counter-clockwise seen from outside), and the shader
-        drops the few whose winding the rounding of their projection turned (faces seen
-        nearly edge-on, which :func:`~tetvr.marching.rim_faces` draws again)."""
+    def _draw_faces(self, prog: Any, rim: list[Any]) -> None:
+        """The boundary faces that face the eye, but for this view's rim faces (``rim``,
+        :meth:`_rim_buffers`): the GL culls the others before they are rasterised (they are
+        wound counter-clockwise seen from outside), and the shader drops the few whose
+        winding the rounding of their projection turned (faces seen nearly edge-on,
+        which are rim faces or covered by their neighbours)."""
         import moderngl
 
         self.ctx.front_face = "ccw"
         self.ctx.enable(moderngl.CULL_FACE)
-        self._faces_vao(prog).render(moderngl.TRIANGLES)
+        if rim:
+            n_others = rim[4]
+            vao = self.ctx.vertex_array(prog, [(self._faces[0], "3f", "in_pos"), (self._faces[1], "1i", "in_id")],
+                                        index_buffer=rim[3], index_element_size=4)
+            if n_others:
+                vao.render(moderngl.TRIANGLES, vertices=n_others)
+            vao.release()
+        else:
+            self._faces_vao(prog).render(moderngl.TRIANGLES)
         self.ctx.disable(moderngl.CULL_FACE)
 
     def _faces_vao(self, prog: Any) -> Any:
