@@ -3,7 +3,7 @@
 Both methods take the same (mesh, camera, transfer function, settings), read the same
 pre-integration table and return the same premultiplied image; they differ in what their
 cost follows. Projected tetrahedra pay per cell (classify, sort, 3-4 triangles each) plus
-per fragment; tet marching pays per ray--tet segment (~40-60 ns each on llvmpipe) plus a
+per fragment; tet marching pays per ray--tet segment (~20 ns each on llvmpipe) plus a
 small per-frame cost for the boundary passes, and needs no sort, so it is exact in
 visibility where a cell order is not. ``RenderSettings(method="auto")`` asks
 :func:`choose`; bench/README.md has the measurements behind the rule.
@@ -22,18 +22,27 @@ if TYPE_CHECKING:
     from .mesh import TetMesh
 
 __all__ = ["choose", "segments_per_tet", "RAYMARCH_ONLY", "PROJECTED_ONLY", "CROSSOVER_SEGMENTS_PER_TET",
-           "AUTO_MAX_TETS"]
+           "AUTO_MAX_TETS", "PROJECTED_NS_PER_TET", "PROJECTED_NS_PER_FRAGMENT", "MARCH_NS_PER_SEGMENT", "AUTO_MARGIN"]
 
-#: Segments per tet above which "auto" takes projected tetrahedra for speed. Measured on
-#: llvmpipe at 512x512 (bench/results/stages.json, 10k to 330k tets), projected tetrahedra
-#: pay ~2.5 us per tet plus ~37 ns per fragment (= segment), tet marching ~6 ms per frame
-#: plus ~64 ns per segment: they cost the same near 90 segments per tet, and projected
-#: tetrahedra are at most ~1.7x faster however large the tets are on screen. "auto" gives
-#: that up until projected tetrahedra are predicted 1.5x faster (~430 segments per tet):
-#: large cells seen close up are where a cell order and degenerate projections cost
-#: projected tetrahedra accuracy (the stability suite, tests/test_near_plane_fuzz.py),
+#: The measured cost model on llvmpipe at 512x512 (bench/results/stages.json, six meshes of
+#: 10k to 1M tets, wall time per frame; least squares): projected tetrahedra pay
+#: ~1.1 us per tet plus ~20.5 ns per fragment, tet marching ~19.5 ns per ray--tet segment
+#: (a fragment of projected tetrahedra is one segment) plus its boundary passes (7-35 ms).
+PROJECTED_NS_PER_TET = 1125.0
+PROJECTED_NS_PER_FRAGMENT = 20.5
+MARCH_NS_PER_SEGMENT = 19.5
+#: "auto" takes projected tetrahedra for speed only where they are predicted this much
+#: faster: large cells seen close up are where a cell order and degenerate projections
+#: cost projected tetrahedra accuracy (the stability suite, tests/test_near_plane_fuzz.py),
 #: which tet marching does not lose.
-CROSSOVER_SEGMENTS_PER_TET = 430.0
+AUTO_MARGIN = 1.5
+#: Segments per tet above which projected tetrahedra are predicted AUTO_MARGIN times faster:
+#: s with MARCH * s = AUTO_MARGIN * (PER_TET + PER_FRAGMENT * s). A segment of tet
+#: marching costs less than a fragment of projected tetrahedra on llvmpipe, so there is
+#: none (infinity): "auto" takes tet marching however large the cells are on screen. A
+#: device with cheaper rasterisation would have one.
+CROSSOVER_SEGMENTS_PER_TET = (AUTO_MARGIN * PROJECTED_NS_PER_TET / (MARCH_NS_PER_SEGMENT - AUTO_MARGIN * PROJECTED_NS_PER_FRAGMENT)
+                              if MARCH_NS_PER_SEGMENT > AUTO_MARGIN * PROJECTED_NS_PER_FRAGMENT else float("inf"))
 #: Above this many tets "auto" keeps projected tetrahedra, which draw in chunks with bounded
 #: memory (bench/memory.py: 10M tets in 3.5 GB of host memory); the ray caster holds every
 #: tet's record (96 B on the GPU, which llvmpipe keeps in host memory) and builds the face
@@ -54,8 +63,8 @@ def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Cam
     """The method a frame with these settings (and this mesh) uses: ``"projected"`` or
     ``"raymarch"``.
 
-    ``"auto"`` picks tet marching -- exact in visibility order, and faster on llvmpipe
-    wherever tets cover fewer than ~90 pixels each (bench/README.md) -- except:
+    ``"auto"`` picks tet marching -- exact in visibility order, and on llvmpipe never
+    slower than projected tetrahedra by more than ~5 % (bench/README.md) -- except:
 
     * settings only projected tetrahedra implement (:data:`PROJECTED_ONLY`: VTK parity,
       8-bit compositing, screen-linear interpolation);
@@ -65,7 +74,7 @@ def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Cam
     * given the camera and size, views from outside the mesh whose tets are so large on
       screen (:func:`segments_per_tet` above :data:`CROSSOVER_SEGMENTS_PER_TET`) that
       rasterising their few triangles is predicted 1.5x faster than walking their many
-      segments.
+      segments (by the measured cost model, never on llvmpipe).
 
     Examples
     --------
