@@ -227,16 +227,15 @@ def test_projected_cut_bricks_differ_on_isolated_pixels(client, local, scenes):
 
 
 def test_auto_takes_tet_marching_for_bricks(client):
-    """"auto" resolves once for all bricks: tet marching, even where the whole mesh alone
-    would take projected tetrahedra for speed (a few large tets seen from outside);
-    projected tetrahedra for settings only they implement."""
+    """"auto" resolves once for all bricks: tet marching (a few large tets seen from
+    outside included); projected tetrahedra for settings only they implement."""
     from tetvr.distributed import distribute_mesh
     from tetvr.method import choose
 
     mesh = synthetic.cube(2, rotate=False)
     camera = Camera.fit(mesh)
     size = (512, 512)
-    assert choose(RenderSettings(), mesh, camera, size) == "projected"
+    assert choose(RenderSettings(), mesh, camera, size) == "raymarch"
     bricks = distribute_mesh(mesh, 2, client)
     try:
         assert bricks.brick_tets == {b.index: len(b.tets) for b in kd_bricks(mesh, 2).bricks()}
