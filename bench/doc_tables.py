@@ -43,7 +43,7 @@ def methods_vs_vtk() -> str:
                     f"| {v['vtk_pt'] * 1e3:.0f} | {s['tetvr']:.2f} | {s['tetvr_projected']:.2f} "
                     f"| {p['tetvr']['exact']:.1f} | {p['tetvr_projected']['exact']:.1f} | {p['vtk_pt']['exact']:.1f} |")
     size = "x".join(str(x) for x in r["size"])
-    return (f"{size}; default: `method=\"auto\"` (tet marching where it measures faster, see above); "
+    return (f"{size}; default: `method=\"auto\"` (tet marching unless the scene needs projected tetrahedra, see above); "
             f"median of {r['repeats']} view changes, frames in turn, {r.get('gl_renderer', '?')}, "
             f"VTK {r.get('vtk_version', '?')}; PSNR (dB) of premultiplied RGB against the exact reference "
             f"({r['date']}, `bench/results/vs_vtk.json`).\n\n" + "\n".join(rows))
