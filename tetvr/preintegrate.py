@@ -531,7 +531,7 @@ def build_table(
     return _finished(data, tf, lo, hi, thick, log_base, encoding, alpha_scale, warped, optics)
 
 
-def _finished(data: NDArray[np.generic], tf: TransferFunction, lo: float, hi: float, thick: NDArray[np.float64],
+def _finished(data: NDArray[np.generic], tf: TransferFunction, lo: float, hi: float, thick: NDArray[np.floating[Any]],
               log_base: float, encoding: str, alpha_scale: float, warped: NDArray[np.float64] | None,
               optics: str) -> PreintegrationTable:
     """The table of :func:`build_table`, read-only, with what its lookups need."""
