@@ -121,10 +121,11 @@ def march_records(mesh: TetMesh) -> MarchRecords:
     inward = np.einsum("ij,ij->i", np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
                        adj.normals[slots // 4, slots % 4]) < 0
     corners[inward] = corners[inward][:, [0, 2, 1]]
+    tri[inward] = tri[inward][:, [0, 2, 1]]
     a, b = corners, np.roll(corners, -1, axis=1)
     edge_keys = np.minimum(a, b).astype(np.int64) * mesh.n_points + np.maximum(a, b)
     return MarchRecords(planes=planes, scalar=scalar, mates=np.ascontiguousarray(adj.mates, dtype=np.int32),
-                        boundary_slots=slots, boundary_triangles=rel[corners].astype(np.float32),
+                        boundary_slots=slots, boundary_triangles=tri.astype(np.float32),
                         boundary_corners=corners.astype(np.int64), boundary_edges=edge_keys, origin=origin,
                         convex=bool(adj.convex))
 

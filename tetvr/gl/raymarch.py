@@ -66,6 +66,24 @@ def raymarch_capacity(max_texture_size: int) -> int:
 
 
 @dataclasses.dataclass(frozen=True)
+class _Rim:
+    """One view's :func:`~tetvr.marching.rim_faces` on the GL: vertex buffers of the
+    rectangles (6 corners a face), of each face's corners in float64 and of its slot, and an
+    index buffer of the boundary faces the rasteriser draws (``n_drawn`` indices)."""
+
+    rects: Any
+    corners: Any
+    slots: Any
+    drawn: Any
+    n_faces: int
+    n_drawn: int
+
+    def release(self) -> None:
+        for b in (self.rects, self.corners, self.slots, self.drawn):
+            b.release()
+
+
+@dataclasses.dataclass(frozen=True)
 class MarchStats:
     """Layers the last ray-cast frame needed (1 for a convex mesh), whether rays were
     cut off at :data:`MAX_LAYERS`, the cells the near plane cut and the boundary faces
@@ -281,48 +299,44 @@ class Marcher:
                 break
         else:
             exhausted = True
-        n_rim = rim[0].size // (6 * 2 * 4) if rim else 0
-        for b in rim[:4]:
-            b.release()
+        if rim is not None:
+            rim.release()
         self.last_stats = MarchStats(layers=layers, layers_exhausted=exhausted, n_near_cells=int(near_ids.size),
-                                     n_rim_faces=n_rim)
+                                     n_rim_faces=rim.n_faces if rim is not None else 0)
         raw = t[f"color_{src}"].read()
         clock.lap("readback")
         return np.frombuffer(raw, dtype=np.float32).reshape(size[1], size[0], 4)[::-1].copy()
 
     def _rim_buffers(self, mesh: TetMesh, rec: MarchRecords, camera: Camera,
-                     size: tuple[int, int]) -> list[Any]:
-        """This view's :func:`~tetvr.marching.rim_faces` as vertex buffers (rectangle
-        corners, 6 a face; the face's corners in float64; its slot), an index buffer of
-        the boundary faces the rasteriser draws and its length; none without rim faces."""
+                     size: tuple[int, int]) -> _Rim | None:
+        """This view's :func:`~tetvr.marching.rim_faces` on the GL, or None without any."""
         idx, rects, exclusive = rim_faces(rec, camera, size)
         if idx.size == 0:
-            return []
+            return None
         corners = rects[:, [[0, 1], [2, 1], [2, 3], [0, 1], [2, 3], [0, 3]]].astype(np.float32)  # (n, 6, 2)
         tri = mesh.points[rec.boundary_corners[idx]] - rec.origin  # (n, 3, 3) float64
         per_face = np.repeat(tri.reshape(-1, 1, 9), 6, axis=1)
         slots = np.repeat(rec.boundary_slots[idx].astype(np.int32), 6)
-        rest = np.ones(rec.boundary_slots.shape[0], dtype=bool)
-        rest[idx[exclusive]] = False
-        others = (3 * np.flatnonzero(rest)[:, None] + np.arange(3)).astype(np.uint32).reshape(-1)
-        return [self.ctx.buffer(corners.tobytes()), self.ctx.buffer(per_face.astype(np.float64).tobytes()),
-                self.ctx.buffer(slots.tobytes()), self.ctx.buffer(others.tobytes() or b"\0" * 4),
-                int(others.size)]
+        drawn = np.ones(rec.boundary_slots.shape[0], dtype=bool)
+        drawn[idx[exclusive]] = False
+        indices = (3 * np.flatnonzero(drawn)[:, None] + np.arange(3)).astype(np.uint32).reshape(-1)
+        return _Rim(rects=self.ctx.buffer(corners.tobytes()), corners=self.ctx.buffer(per_face.tobytes()),
+                    slots=self.ctx.buffer(slots.tobytes()), drawn=self.ctx.buffer(indices.tobytes() or b"\0" * 4),
+                    n_faces=int(idx.size), n_drawn=int(indices.size))
 
-    def _draw_rim(self, rim: list[Any], perspective: int, peel: int, common: dict[str, Any],
+    def _draw_rim(self, rim: _Rim | None, perspective: int, peel: int, common: dict[str, Any],
                   samplers: dict[str, Any]) -> None:
         import moderngl
 
-        if not rim:
+        if rim is None:
             return
         prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=peel,
                                    RIM=1)
-        self._set(prog, {**common, **samplers})
-        for name, value in (("u_inv_view_d", common["u_inv_view"]), ("u_ray_scale_d", common["u_ray_scale"])):
-            if name in prog:
-                prog[name].write(np.ascontiguousarray(np.asarray(value, dtype=np.float64).T).tobytes())
-        vao = self.ctx.vertex_array(prog, [(rim[0], "2f", "in_pos"), (rim[1], "3f8 3f8 3f8", "in_c0", "in_c1", "in_c2"),
-                                           (rim[2], "1i", "in_id")])
+        self._set(prog, {**common, **samplers, "u_inv_view_d": common["u_inv_view"],
+                         "u_ray_scale_d": common["u_ray_scale"]})
+        vao = self.ctx.vertex_array(prog, [(rim.rects, "2f", "in_pos"),
+                                           (rim.corners, "3f8 3f8 3f8", "in_c0", "in_c1", "in_c2"),
+                                           (rim.slots, "1i", "in_id")])
         vao.render(moderngl.TRIANGLES)
         vao.release()
 
@@ -331,7 +345,7 @@ class Marcher:
 
         set_uniforms(prog, **uniforms)
 
-    def _draw_faces(self, prog: Any, rim: list[Any]) -> None:
+    def _draw_faces(self, prog: Any, rim: _Rim | None) -> None:
         """The boundary faces that face the eye, but for this view's rim faces (``rim``,
         :meth:`_rim_buffers`): the GL culls the others before they are rasterised (they are
         wound counter-clockwise seen from outside), and the shader drops the few whose
@@ -341,12 +355,11 @@ class Marcher:
 
         self.ctx.front_face = "ccw"
         self.ctx.enable(moderngl.CULL_FACE)
-        if rim:
-            n_others = rim[4]
+        if rim is not None:
             vao = self.ctx.vertex_array(prog, [(self._faces[0], "3f", "in_pos"), (self._faces[1], "1i", "in_id")],
-                                        index_buffer=rim[3], index_element_size=4)
-            if n_others:
-                vao.render(moderngl.TRIANGLES, vertices=n_others)
+                                        index_buffer=rim.drawn, index_element_size=4)
+            if rim.n_drawn:
+                vao.render(moderngl.TRIANGLES, vertices=rim.n_drawn)
             vao.release()
         else:
             self._faces_vao(prog).render(moderngl.TRIANGLES)

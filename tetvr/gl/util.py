@@ -305,13 +305,15 @@ WARP_UNIT = 8
 
 
 def set_uniforms(prog: Any, **uniforms: Any) -> None:
-    """Set the uniforms a program uses; 2D arrays are written as column-major matrices."""
+    """Set the uniforms a program uses; 2D arrays are written as column-major matrices, in
+    float64 for a ``dmat`` uniform."""
     for name, value in uniforms.items():
         if name not in prog:
             continue  # optimised away by the compiler
         arr = np.asarray(value) if isinstance(value, np.ndarray) else None
         if arr is not None and arr.ndim == 2:
-            prog[name].write(arr.T.astype(np.float32).tobytes())  # GLSL is column-major
+            dtype = np.float64 if prog[name].fmt.endswith("d") else np.float32
+            prog[name].write(arr.T.astype(dtype).tobytes())  # GLSL is column-major
         else:
             prog[name].value = value
 
