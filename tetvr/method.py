@@ -41,8 +41,9 @@ AUTO_MARGIN = 1.5
 #: marching costs less than a fragment of projected tetrahedra on llvmpipe, so there is
 #: none (infinity): "auto" takes tet marching however large the cells are on screen. A
 #: device with cheaper rasterisation would have one.
-CROSSOVER_SEGMENTS_PER_TET = (AUTO_MARGIN * PROJECTED_NS_PER_TET / (MARCH_NS_PER_SEGMENT - AUTO_MARGIN * PROJECTED_NS_PER_FRAGMENT)
-                              if MARCH_NS_PER_SEGMENT > AUTO_MARGIN * PROJECTED_NS_PER_FRAGMENT else float("inf"))
+CROSSOVER_SEGMENTS_PER_TET = (
+    AUTO_MARGIN * PROJECTED_NS_PER_TET / (MARCH_NS_PER_SEGMENT - AUTO_MARGIN * PROJECTED_NS_PER_FRAGMENT)
+    if MARCH_NS_PER_SEGMENT > AUTO_MARGIN * PROJECTED_NS_PER_FRAGMENT else float("inf"))
 #: Above this many tets "auto" keeps projected tetrahedra, which draw in chunks with bounded
 #: memory (bench/memory.py: 10M tets in 3.5 GB of host memory); the ray caster holds every
 #: tet's record (96 B on the GPU, which llvmpipe keeps in host memory) and builds the face
@@ -96,7 +97,10 @@ def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Cam
             return "projected"
         if folded_faces(mesh):
             return "projected"
-        if (camera is not None and size is not None and not _eye_near_mesh(mesh, camera)
+        # (The estimate costs a pass over a sample of cells on every view change: skipped
+        # where no cell size can cross over.)
+        if (camera is not None and size is not None and CROSSOVER_SEGMENTS_PER_TET < float("inf")
+                and not _eye_near_mesh(mesh, camera)
                 and segments_per_tet(mesh, camera, size) > CROSSOVER_SEGMENTS_PER_TET):
             return "projected"
     return "raymarch"
