@@ -59,6 +59,12 @@ def _layout(max_texture_size: int) -> tuple[int, int]:
     return min(per_row, 4096), min(mates, 8192)
 
 
+def _rect_triangles(rects: NDArray[np.float64]) -> NDArray[np.float32]:
+    """NDC rectangles (x_lo, y_lo, x_hi, y_hi) as two counter-clockwise triangles each:
+    (n, 6, 2) corners."""
+    return rects[:, [[0, 1], [2, 1], [2, 3], [0, 1], [2, 3], [0, 3]]].astype(np.float32)
+
+
 def raymarch_capacity(max_texture_size: int) -> int:
     """The most tets whose records fit one texture of a GL with this GL_MAX_TEXTURE_SIZE."""
     per_row, mates_width = _layout(max_texture_size)
@@ -247,8 +253,7 @@ class Marcher:
         if near_ids.size:
             near_prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=1, PEEL=0, RIM=0)
             self._set(near_prog, common)
-            corners = rects[:, [[0, 1], [2, 1], [2, 3], [0, 1], [2, 3], [0, 3]]].astype(np.float32)  # (n, 6, 2)
-            near_buffers = [ctx.buffer(corners.tobytes()),
+            near_buffers = [ctx.buffer(_rect_triangles(rects).tobytes()),
                             ctx.buffer(np.repeat(near_ids.astype(np.int32), 6).tobytes())]
             vao = ctx.vertex_array(near_prog, [(near_buffers[0], "2f", "in_pos"), (near_buffers[1], "1i", "in_id")])
             vao.render(moderngl.TRIANGLES)
@@ -313,14 +318,14 @@ class Marcher:
         idx, rects, exclusive = rim_faces(rec, camera, size)
         if idx.size == 0:
             return None
-        corners = rects[:, [[0, 1], [2, 1], [2, 3], [0, 1], [2, 3], [0, 3]]].astype(np.float32)  # (n, 6, 2)
         tri = mesh.points[rec.boundary_corners[idx]] - rec.origin  # (n, 3, 3) float64
         per_face = np.repeat(tri.reshape(-1, 1, 9), 6, axis=1)
         slots = np.repeat(rec.boundary_slots[idx].astype(np.int32), 6)
         drawn = np.ones(rec.boundary_slots.shape[0], dtype=bool)
         drawn[idx[exclusive]] = False
         indices = (3 * np.flatnonzero(drawn)[:, None] + np.arange(3)).astype(np.uint32).reshape(-1)
-        return _Rim(rects=self.ctx.buffer(corners.tobytes()), corners=self.ctx.buffer(per_face.tobytes()),
+        return _Rim(rects=self.ctx.buffer(_rect_triangles(rects).tobytes()),
+                    corners=self.ctx.buffer(per_face.tobytes()),
                     slots=self.ctx.buffer(slots.tobytes()), drawn=self.ctx.buffer(indices.tobytes() or b"\0" * 4),
                     n_faces=int(idx.size), n_drawn=int(indices.size))
 
