@@ -245,13 +245,13 @@ class Marcher:
         t["entry_fbo"].clear(depth=1.0)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.depth_func = "<"
-        face_prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=0, RIM=0)
+        face_prog = self._entry_program(perspective)
         self._set(face_prog, common)
         rim = self._rim_buffers(mesh, rec, camera, size)
         self._draw_faces(face_prog, rim)
         near_buffers: list[Any] = []
         if near_ids.size:
-            near_prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=1, PEEL=0, RIM=0)
+            near_prog = self._entry_program(perspective, near_cells=1)
             self._set(near_prog, common)
             near_buffers = [ctx.buffer(_rect_triangles(rects).tobytes()),
                             ctx.buffer(np.repeat(near_ids.astype(np.int32), 6).tobytes())]
@@ -286,7 +286,7 @@ class Marcher:
             src, dst = dst, src
             clock.lap("march")
             # Peel: the next entry behind where each ray left the mesh, if any ray did.
-            peel = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=1, RIM=0)
+            peel = self._entry_program(perspective, peel=1)
             self._set(peel, {**common, **samplers})
             t[f"state_{src}"].use(5)
             t[f"last_{src}"].use(7)
@@ -335,8 +335,7 @@ class Marcher:
 
         if rim is None:
             return
-        prog = self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=0, PEEL=peel,
-                                   RIM=1)
+        prog = self._entry_program(perspective, peel=peel, rim=1)
         self._set(prog, {**common, **samplers, "u_inv_view_d": common["u_inv_view"],
                          "u_ray_scale_d": common["u_ray_scale"]})
         vao = self.ctx.vertex_array(prog, [(rim.rects, "2f", "in_pos"),
@@ -344,6 +343,11 @@ class Marcher:
                                            (rim.slots, "1i", "in_id")])
         vao.render(moderngl.TRIANGLES)
         vao.release()
+
+    def _entry_program(self, perspective: int, near_cells: int = 0, peel: int = 0, rim: int = 0) -> Any:
+        """march_entry's program for this mesh's record layout (see the shader's defines)."""
+        return self.owner._program("march_entry", **self._shifts, PERSPECTIVE=perspective, NEAR_CELLS=near_cells,
+                                   PEEL=peel, RIM=rim)
 
     def _set(self, prog: Any, uniforms: dict[str, Any]) -> None:
         from .util import set_uniforms
