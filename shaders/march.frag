@@ -13,10 +13,15 @@
 // is not carried across faces), FIRST (the first layer), EXTENT 1 (instead of colour, f_color = (eye depth of
 // the first entry, of the last exit, segments walked, 0): the ray limits for fusion with a
 // volume, and the segment count the benchmarks divide by; no table lookups).
-// The walk leaves each tet by the nearest of the three faces other than the one it came in
-// by whose plane the ray points out of; the scalar is carried from face to face (it is
-// continuous: point data is linear in each tet; cell data is read per tet), so each step reads three planes, the
-// scalar record and the mates.
+// The walk: the first tet (where the ray enters, or starts at the near plane) is left by
+// the nearest of its face planes the ray points out of. From then on, by points (Marmitt &
+// Slusallek 2006; tetvr.marching): the ray holds the triangle it came in by, seen in the
+// plane across the ray about the ray's origin; the signs of three 2D cross products with
+// the tet's fourth point choose the face it leaves by, and the same products weigh the
+// exit's t and scalar. A step reads one link (the next tet, its face, the point across
+// it) and one point; the triangle it carries is about the ray whatever the rounding. The
+// scalar is carried from face to face (it is continuous: point data is linear in each
+// tet; cell data comes with the link).
 // With clip planes or a ray limit (window.glsl: CLIP_PLANES, RAY_LIMIT) the walk still
 // starts at the entry, but only each segment's part inside the pixel's window is
 // composited (its scalars from the tet's linear field at the cut), and it stops at the
@@ -72,6 +77,52 @@ layout(location = 0) out vec4 f_color;
 layout(location = 1) out vec2 f_state;
 layout(location = 2) out int f_last;
 
+// The part of a segment from (t_in, s_in) to (t_out, s_out) that is kept, composited into
+// acc; true where the ray stops there (the far end of its window, or opaque). On return
+// t_out is where the segment ended (cut at the far end) and s_out the scalar there.
+bool composite(inout vec4 acc, float t_in, float s_in, inout float t_out, inout float s_out, vec2 win, float per_t) {
+    bool at_far = t_out >= win.y;
+    if (at_far) {
+        // The scalar is linear along the segment (within one tet).
+        float t_far = win.y;
+        s_out = t_out > t_in ? s_in + (s_out - s_in) * ((t_far - t_in) / (t_out - t_in)) : s_out;
+        t_out = t_far;
+    }
+#if RAY_WINDOW
+    // The part of the segment in front of the window's near end is not composited.
+    float t_a = max(t_in, win.x);
+    bool shown = t_out > t_a;
+    float s_a = t_a > t_in && t_out > t_in ? s_in + (s_out - s_in) * ((t_a - t_in) / (t_out - t_in)) : s_in;
+#else
+    float t_a = t_in, s_a = s_in;
+    const bool shown = true;
+#endif
+#if EXTENT
+    if (shown) {
+        acc.x = min(acc.x, t_a);
+        acc.y = max(acc.y, t_out);
+    }
+    acc.z += 1.0;
+    return at_far;
+#else
+    if (shown) acc += (1.0 - acc.a) * segment(s_a, s_out, (t_out - t_a) * per_t);
+    return at_far || acc.a >= u_opaque;
+#endif
+}
+
+// e(p, q): the turn from p to q about the origin of the plane across the ray.
+float cross2(vec2 p, vec2 q) {
+    return p.x * q.y - p.y * q.x;
+}
+
+// The slot in the next tet of the point in slot s of this one, the ray going from face k
+// here to face f there: the records list each tet's points in increasing id, so the three
+// points of a face come in the same order in both tets.
+int next_slot(int s, int k, int f) {
+    int i = s - int(s > k);
+    return i + int(i >= f);
+}
+
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
 #if FIRST
@@ -100,9 +151,8 @@ void main() {
 #if RAY_WINDOW
     vec2 win = ray_window((gl_FragCoord.xy / u_viewport * 2.0 - 1.0) * u_ray_scale, px, u_near, u_far);
     if (win.y <= win.x) return;  // nothing of this ray is kept
-    float far = win.y;
 #else
-    float far = u_far;
+    vec2 win = vec2(u_near, u_far);
 #endif
     vec3 o, d;
     pixel_ray(gl_FragCoord.xy, o, d);
@@ -141,67 +191,126 @@ void main() {
         }
         t_in = u_near;
     }
-    vec4 g = tet_scalar(tet);
-    float s_in = dot(g.xyz, o + t_in * d) + g.w;
 #if EXTENT && !RAY_WINDOW
     acc.x = min(acc.x, t_in);
 #endif
-    float status = STATUS_DONE;
+
+    // The first tet: the ray leaves it by the nearest of the three faces other than the
+    // one it came in by whose plane it points out of.
+    vec4 g = tet_scalar(tet);
+    float s_in = dot(g.xyz, o + t_in * d) + g.w;
     float t_out = t_in;
-    for (int step = 0; step < u_max_steps; ++step) {
-        float t_exit = 3.0e38;
-        int exit_face = -1;
-        // The three faces other than the one the ray came in by: three fetches for every
-        // lane alike (a skipped iteration would still be fetched for the other lanes).
-        ivec2 rec = tet_record(tet);
-        for (int j = 1; j < 4; ++j) {
-            int k = (face + j) & 3;
-            vec4 plane = texelFetch(u_planes, rec + ivec2(k, 0), 0);
-            float den = dot(plane.xyz, d);
-            if (den > 0.0) {
-                float t = -(dot(plane.xyz, o) + plane.w) / den;
-                if (t < t_exit) { t_exit = t; exit_face = k; }
+    float t_exit = 3.0e38;
+    int exit_face = -1;
+    for (int j = 1; j < 4; ++j) {
+        int k = (face + j) & 3;
+        vec4 plane = face_plane(tet, k);
+        float den = dot(plane.xyz, d);
+        if (den > 0.0) {
+            float t = -(dot(plane.xyz, o) + plane.w) / den;
+            if (t < t_exit) { t_exit = t; exit_face = k; }
+        }
+    }
+    if (exit_face < 0) {  // no face ahead: only rounding on a degenerate ray does this
+        f_color = acc;
+        f_state = vec2(t_out, STATUS_DONE);
+        return;
+    }
+    t_out = max(t_exit, t_in);
+    float s_out = dot(g.xyz, o + t_out * d) + g.w;
+    if (composite(acc, t_in, s_in, t_out, s_out, win, per_t)) {
+        f_color = acc;
+        f_state = vec2(t_out, STATUS_DONE);
+        return;
+    }
+    ivec4 link = tet_link(tet, exit_face);
+    float status = STATUS_REENTER;
+    if (link.x >= 0) {
+        // The rest of the walk, by points (Marmitt & Slusallek 2006): the points are seen
+        // in the plane across the ray, the ray at its origin. The face the ray came in by
+        // is a triangle (a, b, c) about the origin, counter-clockwise; the tet's fourth
+        // point n makes a face with each of its edges, and the signs of e(a, n), e(b, n),
+        // e(c, n) say which one the ray leaves by. The edge values e of that face are the
+        // exit's barycentric weights (its t and its scalar) and carry over to the next
+        // triangle, so the walk always holds a triangle about the ray, whatever the
+        // rounding. A step reads the link across the exit face and the point it leads to.
+        vec3 dn = normalize(d);
+        vec3 e1 = normalize(abs(dn.x) < 0.6 ? vec3(0.0, -dn.z, dn.y) : vec3(-dn.y, dn.x, 0.0));
+        vec3 e2 = cross(dn, e1);
+        float inv_dd = 1.0 / dot(d, d);
+        vec3 ow = ray_from_eye(gl_FragCoord.xy);
+        // The first tet's three points on the exit face, in slots k + 1, k + 2, k + 3.
+        int k = exit_face;
+        ivec4 ids = tet_ids(tet);
+        int sa = (k + 1) & 3, sb = (k + 2) & 3, sc = (k + 3) & 3;
+        vec4 qa = point_record(ids[sa]), qb = point_record(ids[sb]), qc = point_record(ids[sc]);
+        vec3 ra = qa.xyz - ow, rb = qb.xyz - ow, rc = qc.xyz - ow;
+        vec2 pa = vec2(dot(ra, e1), dot(ra, e2)), pb = vec2(dot(rb, e1), dot(rb, e2)),
+             pc = vec2(dot(rc, e1), dot(rc, e2));
+        vec3 ts = vec3(dot(ra, d), dot(rb, d), dot(rc, d)) * inv_dd;
+        vec3 ss = vec3(qa.w, qb.w, qc.w);
+        vec3 E = vec3(cross2(pb, pc), cross2(pc, pa), cross2(pa, pb));
+        if (E.x + E.y + E.z < 0.0) {  // clockwise about the ray: swap b and c
+            int i = sb; sb = sc; sc = i;
+            vec2 p = pb; pb = pc; pc = p;
+            ts = ts.xzy;
+            ss = ss.xzy;
+            E = -E.xzy;
+        }
+        status = STATUS_DONE;
+        for (int step = 1; step < u_max_steps; ++step) {
+            // Into the next tet by its face f: the slots there of the triangle's points.
+            int f = link.x & 3;
+            sa = next_slot(sa, k, f);
+            sb = next_slot(sb, k, f);
+            sc = next_slot(sc, k, f);
+            tet = link.x >> 2;
+            t_in = t_out;
+#if CELL_DATA
+            s_in = intBitsToFloat(link.z);  // the field jumps at the face: each cell's own constant
+#else
+            s_in = s_out;
+#endif
+            vec4 qn = point_record(link.y);  // the point across face f
+            vec3 rn = qn.xyz - ow;
+            vec2 pn = vec2(dot(rn, e1), dot(rn, e2));
+            float tn = dot(rn, d) * inv_dd;
+            float fa = cross2(pa, pn), fb = cross2(pb, pn), fc = cross2(pc, pn);
+            // Out by (b, c, n) if e(b, n) <= 0 < e(c, n); by (c, a, n) if e(c, n) <= 0 < e(a, n);
+            // else by (a, b, n). The next triangle keeps the counter-clockwise turn.
+            bool drop_a = fb <= 0.0 && fc > 0.0;
+            bool drop_b = !drop_a && fc <= 0.0 && fa > 0.0;
+            k = drop_a ? sa : (drop_b ? sb : sc);  // the exit face: opposite the point left behind
+            E = drop_a ? vec3(fc, -fb, E.x) : (drop_b ? vec3(fa, -fc, E.y) : vec3(fb, -fa, E.z));
+            int s0 = drop_a ? sb : (drop_b ? sc : sa);
+            int s1 = drop_a ? sc : (drop_b ? sa : sb);
+            vec2 p0 = drop_a ? pb : (drop_b ? pc : pa);
+            vec2 p1 = drop_a ? pc : (drop_b ? pa : pb);
+            ts = vec3(drop_a ? ts.yz : (drop_b ? ts.zx : ts.xy), tn);
+            ss = vec3(drop_a ? ss.yz : (drop_b ? ss.zx : ss.xy), qn.w);
+            sa = s0; sb = s1; sc = f;
+            pa = p0; pb = p1; pc = pn;
+            vec3 w = max(E, 0.0);
+            float sum = w.x + w.y + w.z;
+            t_out = max(sum > 0.0 ? dot(w, ts) / sum : t_in, t_in);
+#if CELL_DATA
+            s_out = s_in;
+#else
+            s_out = sum > 0.0 ? dot(w, ss) / sum : s_in;
+#endif
+            if (composite(acc, t_in, s_in, t_out, s_out, win, per_t)) break;
+            link = tet_link(tet, k);
+            if (link.x < 0) {
+                // Out of the mesh: where, by the face's plane, as the next entry pass
+                // finds the faces it may enter by (march_entry.frag), so that a face
+                // that coincides with the one left is found again at the same t.
+                vec4 plane = face_plane(tet, k);
+                float den = dot(plane.xyz, d);
+                if (den > 0.0) t_out = max(-(dot(plane.xyz, o) + plane.w) / den, t_in);
+                status = STATUS_REENTER;
+                break;
             }
         }
-        if (exit_face < 0) break;  // no face ahead: only rounding on a degenerate ray does this
-        t_out = max(t_exit, t_in);
-        bool at_far = t_out >= far;
-        if (at_far) t_out = far;
-        float s_out = dot(g.xyz, o + t_out * d) + g.w;
-#if RAY_WINDOW
-        // The part of the segment in front of the window's near end is not composited.
-        float t_a = max(t_in, win.x);
-        bool shown = t_out > t_a;
-        float s_a = t_a > t_in ? dot(g.xyz, o + t_a * d) + g.w : s_in;
-#else
-        float t_a = t_in, s_a = s_in;
-        const bool shown = true;
-#endif
-#if EXTENT
-        if (shown) {
-            acc.x = min(acc.x, t_a);
-            acc.y = max(acc.y, t_out);
-        }
-        acc.z += 1.0;
-        if (at_far) break;
-#else
-        if (shown) acc += (1.0 - acc.a) * segment(s_a, s_out, (t_out - t_a) * per_t);
-        if (at_far || acc.a >= u_opaque) break;
-#endif
-        int mate = tet_mates(tet)[exit_face];
-        if (mate < 0) {
-            status = STATUS_REENTER;
-            break;
-        }
-        tet = mate >> 2;
-        face = mate & 3;
-        t_in = t_out;
-        g = tet_scalar(tet);
-#if CELL_DATA
-        s_in = g.w;  // the field jumps at the face: each cell's own constant
-#else
-        s_in = s_out;
-#endif
     }
     f_color = acc;
     f_state = vec2(t_out, status);

@@ -7,19 +7,24 @@
 // a segment's world length is (t1 - t0) * length(d).
 // Records: u_planes (RGBA32F) holds RECORD_TEXELS texels per tet, 2^TETS_ROW_SHIFT tets a row:
 // texels 0..3 the face planes (n, w), n . x_obj + w < 0 inside, n the outward unit normal;
-// texel 4 the scalar (g, c), s = g . x_obj + c. u_mates (RGBA32I), 2^MATES_ROW_SHIFT tets
-// a row: per face 4 * neighbour + its face there, -1 on the boundary.
-// Defines: PERSPECTIVE.
+// texel 4 the scalar (g, c), s = g . x_obj + c. Slot k of a tet is its k-th point in
+// increasing id, face k the face opposite it. u_links (RGBA32I), four texels a tet,
+// 2^LINKS_ROW_SHIFT tets a row: across face k, (4 * neighbour + its face there, -1 on the
+// boundary; the neighbour's point opposite that face; its cell scalar's float bits).
+// u_ids (RGBA32I) the tets' point ids and u_points (RGBA32F) the points (position relative
+// to the eye, written per view; scalar), 2^ITEMS_ROW_SHIFT a row.
+// Defines: PERSPECTIVE, TETS_ROW_SHIFT, LINKS_ROW_SHIFT, ITEMS_ROW_SHIFT (powers of two:
+// llvmpipe has no vector integer division, a shift and a mask are one instruction per
+// lane; tetvr.gl.raymarch chooses them).
 
 #define RECORD_TEXELS 5
 #define STATUS_DONE 0.0
 #define STATUS_REENTER 1.0   // the ray left the mesh: look for the next entry (peel)
 
 uniform sampler2D u_planes;
-uniform isampler2D u_mates;
-// TETS_ROW_SHIFT, MATES_ROW_SHIFT: log2 of the tets a row of u_planes and of u_mates hold
-// (powers of two: llvmpipe has no vector integer division, a shift and a mask are one
-// instruction per lane; tetvr.gl.raymarch chooses them).
+uniform isampler2D u_ids;
+uniform isampler2D u_links;
+uniform sampler2D u_points;
 uniform mat4 u_inv_view;    // eye -> obj
 uniform vec2 u_ray_scale;   // NDC -> eye x, y per unit depth (perspective) or eye x, y (parallel)
 uniform vec2 u_viewport;    // pixels
@@ -39,9 +44,21 @@ vec4 tet_scalar(int tet) {
     return texelFetch(u_planes, tet_record(tet) + ivec2(4, 0), 0);
 }
 
-ivec4 tet_mates(int tet) {
-    return texelFetch(u_mates, ivec2(tet & ((1 << MATES_ROW_SHIFT) - 1), tet >> MATES_ROW_SHIFT), 0);
+// The tet's four point ids, increasing, slot k opposite face k.
+ivec4 tet_ids(int tet) {
+    return texelFetch(u_ids, ivec2(tet & ((1 << ITEMS_ROW_SHIFT) - 1), tet >> ITEMS_ROW_SHIFT), 0);
 }
+
+// A point's (position relative to the eye, scalar); tetvr.gl.raymarch writes them per view.
+vec4 point_record(int p) {
+    return texelFetch(u_points, ivec2(p & ((1 << ITEMS_ROW_SHIFT) - 1), p >> ITEMS_ROW_SHIFT), 0);
+}
+
+// The link across the tet's face k (see Records above).
+ivec4 tet_link(int tet, int k) {
+    return texelFetch(u_links, ivec2(((tet & ((1 << LINKS_ROW_SHIFT) - 1)) << 2) + k, tet >> LINKS_ROW_SHIFT), 0);
+}
+
 
 // The ray through the centre of the pixel at window position xy, in obj space.
 void pixel_ray(vec2 xy, out vec3 o_obj, out vec3 d_obj) {
@@ -52,6 +69,17 @@ void pixel_ray(vec2 xy, out vec3 o_obj, out vec3 d_obj) {
 #else
     o_obj = (u_inv_view * vec4(r, 0.0, 1.0)).xyz;
     d_obj = mat3(u_inv_view) * vec3(0.0, 0.0, -1.0);
+#endif
+}
+
+// The origin of the ray through window position xy relative to the eye, in obj axes
+// (the eye itself in perspective).
+vec3 ray_from_eye(vec2 xy) {
+#if PERSPECTIVE
+    return vec3(0.0);
+#else
+    vec2 r = (xy / u_viewport * 2.0 - 1.0) * u_ray_scale;
+    return mat3(u_inv_view) * vec3(r, 0.0);
 #endif
 }
 

@@ -10,14 +10,31 @@ integrated by a lookup in the same pre-integration table as projected tetrahedra
 (Kraus et al. 2004), composited front to back in traversal order: there is no sort and
 no visibility error, and the cost follows the ray--tet segments, not the tets.
 
-The GPU needs, per tet, what the walk reads at every step (built here once per mesh):
+The walk by points (Marmitt & Slusallek 2006, "Fast ray traversal of tetrahedral and
+hexahedral meshes for direct volume rendering"): seen in the plane across the ray, the face
+a ray came in by is a triangle about the ray; the tet's fourth point and the three edges
+to it say, by the signs of three 2D cross products, which face the ray leaves by, and the
+same products are the exit's barycentric weights (its depth and its scalar, exact for a
+linear field). The walk carries the triangle from tet to tet, so each step reads one link
+and one point -- against three face planes, a scalar record and the mates in a walk by
+planes -- and whatever the rounding, the triangle it holds is about the ray.
 
-* the four face planes, outward unit normal ``n`` and ``w`` with ``n . x + w = 0`` on the
-  face (``x`` relative to the mesh's bounding-box centre, as the GPU's points are);
-* the scalar as an affine function ``s(x) = g . x + c`` (point data is linear in a tet, so
-  the scalar leaving one tet is the scalar entering the next: it is carried along);
+Built here once per mesh:
+
+* each tet's points in increasing id (slot ``k`` of every record is the ``k``-th, face
+  ``k`` is opposite it): the three points of a face then come in the same order in both
+  its tets, so the walk finds their slots in the next tet from the two faces' slots alone;
 * each face's mate: ``4 * neighbour + k`` for the neighbour's face ``k`` that is the same
-  face, or -1 on the boundary (the ray leaves the mesh there).
+  face, or -1 on the boundary (the ray leaves the mesh there), and the *link*: the mate,
+  the neighbour's point opposite that face and, for cell data, the neighbour's scalar;
+* the four face planes, outward unit normal ``n`` and ``w`` with ``n . x + w = 0`` on the
+  face (``x`` relative to the mesh's bounding-box centre), and the scalar as an affine
+  function ``s(x) = g . x + c``: the entry passes and each ray's first tet use them (a ray
+  that starts inside a tet, at the near plane, has no triangle yet).
+
+The points themselves go to the GPU per view, relative to the eye in float64 first, so
+that float32 keeps their precision near the eye wherever the mesh's centre is
+(:mod:`tetvr.gl.raymarch`).
 
 Rays enter the mesh at front-facing boundary faces; where the mesh is not convex a ray may
 leave and enter again, and each further entry is found by peeling the boundary at the
@@ -58,6 +75,12 @@ class MarchRecords:
         negative inside (``x`` relative to ``origin``).
     scalar : (m, 4) float32, ``(g, c)`` with ``s(x) = g . x + c``.
     mates : (m, 4) int32, ``4 * neighbour + k`` across each face, -1 on the boundary.
+    ids : (m, 4) int32, each tet's point ids in increasing order: slot ``k`` of every
+        record is this point (face ``k`` is opposite it), so the three points of a face are
+        in the same order in both its tets.
+    links : (m, 4, 4) int32, across face ``k``: (the mate, the neighbour's point opposite
+        that face, the neighbour's cell scalar as float32 bits (cell data; else 0), 0); the
+        walk reads one link a step (``march.frag``).
     boundary_slots : (F,) int64, ``4 * t + k`` of each boundary face.
     boundary_triangles : (F, 3, 3) float32, the boundary faces' corners (relative to
         ``origin``), counter-clockwise seen from outside the mesh.
@@ -72,6 +95,8 @@ class MarchRecords:
     planes: NDArray[np.float32]
     scalar: NDArray[np.float32]
     mates: NDArray[np.int32]
+    ids: NDArray[np.int32]
+    links: NDArray[np.int32]
     boundary_slots: NDArray[np.int64]
     boundary_triangles: NDArray[np.float32]
     boundary_corners: NDArray[np.int64]
@@ -81,7 +106,8 @@ class MarchRecords:
 
     @property
     def nbytes(self) -> int:
-        return int(self.planes.nbytes + self.scalar.nbytes + self.mates.nbytes + self.boundary_triangles.nbytes)
+        return int(self.planes.nbytes + self.scalar.nbytes + self.mates.nbytes + self.ids.nbytes
+                   + self.links.nbytes + self.boundary_triangles.nbytes)
 
 
 def march_records(mesh: TetMesh) -> MarchRecords:
@@ -92,8 +118,8 @@ def march_records(mesh: TetMesh) -> MarchRecords:
     --------
     >>> from tetvr import synthetic
     >>> rec = march_records(synthetic.two_tets())
-    >>> rec.planes.shape, rec.mates.tolist()
-    ((2, 4, 4), [[-1, -1, -1, 6], [-1, -1, 3, -1]])
+    >>> rec.planes.shape, rec.ids.tolist(), rec.mates.tolist()
+    ((2, 4, 4), [[0, 1, 2, 3], [0, 1, 2, 4]], [[-1, -1, -1, 7], [-1, -1, -1, 3]])
     """
     adj = face_adjacency(mesh)
     origin = np.asarray(adj.origin, dtype=np.float64)
@@ -116,15 +142,33 @@ def march_records(mesh: TetMesh) -> MarchRecords:
         scalar[:, 3] = mesh.cell_scalars
     slots = np.asarray(adj.boundary_slots, dtype=np.int64)
     corners = tets[slots // 4][np.arange(slots.shape[0])[:, None], FACE_VERTICES[slots % 4]]
+    # The records list each tet's points in increasing id (slot k still opposite face k),
+    # so the three points of a face come in the same order in both its tets.
+    order = np.argsort(tets, axis=1, kind="stable")
+    new_slot = np.empty_like(order)
+    np.put_along_axis(new_slot, order, np.arange(4)[None, :], axis=1)
+    ids = np.take_along_axis(tets, order, axis=1)
+    planes = np.take_along_axis(planes, order[..., None], axis=1)
+    mates = np.take_along_axis(np.asarray(adj.mates, dtype=np.int64), order, axis=1)
+    inner = mates >= 0
+    nbr, there = mates >> 2, new_slot[mates >> 2, mates & 3]
+    mates = np.where(inner, 4 * nbr + there, -1)
+    links = np.zeros((mesh.n_tets, 4, 4), dtype=np.int32)
+    links[..., 0] = mates
+    links[..., 1] = np.where(inner, ids[nbr, there], -1)
+    if mesh.cell_scalars is not None:
+        cell = np.asarray(mesh.cell_scalars, dtype=np.float32).view(np.int32)
+        links[..., 2] = np.where(inner, cell[nbr], 0)
     # Wound counter-clockwise seen from outside (the GL's front face): entry passes cull the rest.
     tri = rel[corners]
     inward = np.einsum("ij,ij->i", np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
                        adj.normals[slots // 4, slots % 4]) < 0
     corners[inward] = corners[inward][:, [0, 2, 1]]
     tri[inward] = tri[inward][:, [0, 2, 1]]
+    slots = 4 * (slots // 4) + new_slot[slots // 4, slots % 4]
     a, b = corners, np.roll(corners, -1, axis=1)
     edge_keys = np.minimum(a, b).astype(np.int64) * mesh.n_points + np.maximum(a, b)
-    return MarchRecords(planes=planes, scalar=scalar, mates=np.ascontiguousarray(adj.mates, dtype=np.int32),
+    return MarchRecords(planes=planes, scalar=scalar, mates=mates.astype(np.int32), ids=ids.astype(np.int32), links=links,
                         boundary_slots=slots, boundary_triangles=tri.astype(np.float32),
                         boundary_corners=corners.astype(np.int64), boundary_edges=edge_keys, origin=origin,
                         convex=bool(adj.convex))

@@ -2,9 +2,10 @@
 
 Owned by a :class:`~tetvr.gl.renderer.Renderer` (its context, its table texture, its
 programs), chosen by ``RenderSettings(method="raymarch")``. Per mesh (once): the records of
-:func:`tetvr.marching.march_records` go to two textures read with ``texelFetch`` (on
+:func:`tetvr.marching.march_records` go to textures read with ``texelFetch`` (on
 llvmpipe several times faster in the walk's loop than the same reads from a storage
-buffer) and the boundary faces to a vertex buffer. Per view, layer by layer:
+buffer) and the boundary faces to a vertex buffer. Per view, the points relative to the
+eye (float64, then float32), and then layer by layer:
 
 1. *entry* (``march_entry.*``): the boundary faces that face each ray -- and, in the first
    layer, the cells the near plane cuts -- are rasterised; the depth test keeps each ray's
@@ -49,14 +50,38 @@ OPAQUE_REMAINDER = 2.0**-20
 _NEAREST = 0x2600
 
 
-def _layout(max_texture_size: int) -> tuple[int, int]:
-    """Tets per row of the records texture and of the mates texture: powers of two, so that
-    the shaders find a tet's row and column by a shift and a mask (llvmpipe has no vector
-    integer division: ``tet / n`` with n a uniform costs one scalar division per lane;
-    at 512x512 the walk measured 17 % faster on bluntfin, 41 % on combustor)."""
-    per_row = 1 << max(0, (max_texture_size // RECORD_TEXELS).bit_length() - 1)
-    mates = 1 << (max_texture_size.bit_length() - 1)
-    return min(per_row, 4096), min(mates, 8192)
+#: Texture units of the walk's records (units 0-10 hold the table, the warp, the entry and
+#: state targets, the ray limit and the transfer function's points: tetvr.gl.renderer).
+PLANES_UNIT, IDS_UNIT, LINKS_UNIT, POINTS_UNIT = 1, 11, 12, 13
+
+
+@dataclasses.dataclass(frozen=True)
+class _Layout:
+    """Items per row of each records texture: powers of two, so that the shaders find an
+    item's row and column by a shift and a mask (llvmpipe has no vector integer division:
+    ``i / n`` with n a uniform costs one scalar division per lane; at 512x512 the walk
+    measured 17 % faster on bluntfin, 41 % on combustor)."""
+
+    planes: int  # tets a row of the planes texture (RECORD_TEXELS texels a tet)
+    links: int   # tets a row of the links texture (four texels a tet)
+    items: int   # tets a row of the ids texture, points a row of the points texture
+
+    @classmethod
+    def of(cls, max_texture_size: int) -> "_Layout":
+        def pow2(n: int) -> int:
+            return 1 << max(0, n.bit_length() - 1)
+
+        return cls(min(pow2(max_texture_size // RECORD_TEXELS), 4096), min(pow2(max_texture_size // 4), 4096),
+                   min(pow2(max_texture_size), 8192))
+
+    def capacity(self, max_texture_size: int) -> int:
+        """The most tets (and points) the textures hold."""
+        return min(self.planes, self.links, self.items) * max_texture_size
+
+    @property
+    def defines(self) -> dict[str, int]:
+        return dict(TETS_ROW_SHIFT=self.planes.bit_length() - 1, LINKS_ROW_SHIFT=self.links.bit_length() - 1,
+                    ITEMS_ROW_SHIFT=self.items.bit_length() - 1)
 
 
 def _rect_triangles(rects: NDArray[np.float64]) -> NDArray[np.float32]:
@@ -67,8 +92,7 @@ def _rect_triangles(rects: NDArray[np.float64]) -> NDArray[np.float32]:
 
 def raymarch_capacity(max_texture_size: int) -> int:
     """The most tets whose records fit one texture of a GL with this GL_MAX_TEXTURE_SIZE."""
-    per_row, mates_width = _layout(max_texture_size)
-    return min(per_row, mates_width) * max_texture_size
+    return _Layout.of(max_texture_size).capacity(max_texture_size)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -110,12 +134,14 @@ class Marcher:
         self.ctx = owner.ctx
         self._mesh: TetMesh | None = None
         self._records: MarchRecords | None = None
-        self._textures: list[Any] = []  # planes, mates
+        self._textures: list[Any] = []  # planes, ids, links, points
         self._faces: list[Any] = []  # boundary positions, slots
         self._vaos: dict[Any, Any] = {}
         self._targets: dict[tuple[int, int], dict[str, Any]] = {}
         self._query: Any = None
         self._shifts: dict[str, int] = {}
+        self._points: NDArray[np.float32] = np.zeros((0, 4), dtype=np.float32)
+        self._points_eye: NDArray[np.float64] | None = None
         self.last_stats = MarchStats()
 
     # ---- ownership ----
@@ -158,30 +184,44 @@ class Marcher:
                  f"overlap in space); tet marching follows faces and renders it wrong: use "
                  f"method=\"projected\" (\"auto\" does)", RuntimeWarning)
         max_tex = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
-        if mesh.n_tets > raymarch_capacity(max_tex):
-            raise MemoryError(f"the ray caster holds at most {raymarch_capacity(max_tex)} tets in one texture on this "
-                              f"GL (GL_MAX_TEXTURE_SIZE {max_tex}); the mesh has {mesh.n_tets}: use "
+        if max(mesh.n_tets, mesh.n_points) > raymarch_capacity(max_tex):
+            raise MemoryError(f"the ray caster holds at most {raymarch_capacity(max_tex)} tets and points in one texture "
+                              f"on this GL (GL_MAX_TEXTURE_SIZE {max_tex}); the mesh has {mesh.n_tets} tets, "
+                              f"{mesh.n_points} points: use "
                               f"method=\"projected\" or split it into bricks (tetvr.cull.submesh)")
-        tets_per_row, mates_width = _layout(max_tex)
-        rows = -(-mesh.n_tets // tets_per_row)
-        mates_rows = -(-mesh.n_tets // mates_width)
-        records = np.zeros((rows * tets_per_row, RECORD_TEXELS, 4), dtype=np.float32)
-        records[:mesh.n_tets, :4] = rec.planes
-        records[:mesh.n_tets, 4] = rec.scalar
-        planes = self.ctx.texture((tets_per_row * RECORD_TEXELS, rows), 4, records.tobytes(), dtype="f4")
-        mates = np.full((mates_rows * mates_width, 4), -1, dtype=np.int32)
-        mates[:mesh.n_tets] = rec.mates
-        mates_tex = self.ctx.texture((mates_width, mates_rows), 4, mates.tobytes(), dtype="i4")
-        for tex in (planes, mates_tex):
+        layout = _Layout.of(max_tex)
+
+        def texture(items: NDArray[Any], per_row: int, texels: int, fill: float) -> Any:
+            rows = -(-items.shape[0] // per_row)
+            data = np.full((rows * per_row, *items.shape[1:]), fill, dtype=items.dtype)
+            data[:items.shape[0]] = items
+            tex = self.ctx.texture((per_row * texels, rows), 4, data.tobytes(), dtype=items.dtype.str[1:])
             tex.filter = (_NEAREST, _NEAREST)
-        self._textures = [planes, mates_tex]
+            return tex
+
+        planes = np.concatenate([rec.planes, rec.scalar[:, None]], axis=1)  # RECORD_TEXELS texels a tet
+        # The points' positions are written per view (_write_points): padded to whole rows here.
+        self._points = np.zeros((-(-mesh.n_points // layout.items) * layout.items, 4), dtype=np.float32)
+        self._points[:mesh.n_points, 3] = mesh.scalars
+        self._points_eye = None
+        self._textures = [texture(planes, layout.planes, RECORD_TEXELS, 0.0), texture(rec.ids, layout.items, 1, 0),
+                          texture(rec.links, layout.links, 4, -1), texture(self._points, layout.items, 1, 0.0)]
         pos = self.ctx.buffer(np.ascontiguousarray(rec.boundary_triangles, dtype=np.float32).tobytes())
         slots = self.ctx.buffer(np.repeat(rec.boundary_slots.astype(np.int32), 3).tobytes())
         self._faces = [pos, slots]
-        self._shifts = dict(TETS_ROW_SHIFT=tets_per_row.bit_length() - 1,
-                            MATES_ROW_SHIFT=mates_width.bit_length() - 1)
+        self._shifts = layout.defines
         self._mesh, self._records = mesh, rec
         return rec
+
+    def _write_points(self, mesh: TetMesh, rec: MarchRecords, inv_view: NDArray[np.float64]) -> None:
+        """The points relative to the eye, for the walk (march.frag): in float64 first,
+        so that float32 keeps their precision near the eye wherever the mesh's centre is."""
+        eye = rec.origin + inv_view[:3, 3]
+        if self._points_eye is not None and np.array_equal(eye, self._points_eye):
+            return
+        self._points[:mesh.n_points, :3] = mesh.points - eye
+        self._textures[3].write(self._points.tobytes())
+        self._points_eye = eye
 
     # ---- per size ----
     def _target(self, size: tuple[int, int]) -> dict[str, Any]:
@@ -232,11 +272,13 @@ class Marcher:
         view = np.asarray(uniforms["u_view"], dtype=np.float64)
         common = dict(u_view=view, u_proj=uniforms["u_proj"], u_inv_view=np.linalg.inv(view),
                       u_ray_scale=uniforms["u_ray_scale"], u_viewport=(float(size[0]), float(size[1])),
-                      u_near=uniforms["u_near"], u_far=uniforms["u_far"], u_planes=1, u_mates=2,
+                      u_near=uniforms["u_near"], u_far=uniforms["u_far"], u_planes=PLANES_UNIT, u_ids=IDS_UNIT, u_links=LINKS_UNIT,
+                      u_points=POINTS_UNIT,
                       u_tolerance=1e-6 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])))
         t = self._target(size)
-        self._textures[0].use(1)
-        self._textures[1].use(2)
+        self._write_points(mesh, rec, common["u_inv_view"])
+        for unit, tex in zip((PLANES_UNIT, IDS_UNIT, LINKS_UNIT, POINTS_UNIT), self._textures):
+            tex.use(unit)
         ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
 
         # Layer 1: boundary faces and the cells the near plane cuts.
