@@ -301,15 +301,18 @@ void main() {
             if (composite(acc, t_in, s_in, t_out, s_out, win, per_t)) break;
             link = tet_link(tet, k);
             if (link.x < 0) {
-                // Out of the mesh: where, by the face's plane, as the next entry pass
-                // finds the faces it may enter by (march_entry.frag), so that a face
-                // that coincides with the one left is found again at the same t.
-                vec4 plane = face_plane(tet, k);
-                float den = dot(plane.xyz, d);
-                if (den > 0.0) t_out = max(-(dot(plane.xyz, o) + plane.w) / den, t_in);
                 status = STATUS_REENTER;
                 break;
             }
+        }
+        if (status == STATUS_REENTER) {
+            // Out of the mesh by face k: where, by its plane, as the next entry pass finds
+            // the faces it may enter by (march_entry.frag), so that a face that coincides
+            // with the one left is found again at the same t. (After the loop: llvmpipe
+            // would read the plane at every step, for every lane.)
+            vec4 plane = face_plane(tet, k);
+            float den = dot(plane.xyz, d);
+            if (den > 0.0) t_out = max(-(dot(plane.xyz, o) + plane.w) / den, t_in);
         }
     }
     f_color = acc;

@@ -15,7 +15,7 @@ eye (float64, then float32), and then layer by layer:
 
 Where a ray left the mesh, the next layer's entry pass peels the boundary behind where it
 left (a non-convex mesh, or separate parts); an occlusion query says when no ray enters
-again. Convex meshes need one layer and one empty peel.
+again. A convex mesh needs one layer and no peel.
 """
 
 from __future__ import annotations
@@ -327,6 +327,8 @@ class Marcher:
             layers += 1
             src, dst = dst, src
             clock.lap("march")
+            if rec.convex:
+                break  # a ray that leaves a convex mesh does not enter it again: no peel
             # Peel: the next entry behind where each ray left the mesh, if any ray did.
             peel = self._entry_program(perspective, peel=1)
             self._set(peel, {**common, **samplers})
