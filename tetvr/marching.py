@@ -88,6 +88,9 @@ class MarchRecords:
         as ``boundary_triangles``.
     boundary_edges : (F, 3) int64, each boundary face's edges as ``i * n_points + j``
         (point indices ``i < j``): faces sharing a key share that edge.
+    boundary_pairs : (P, 2) int64, the pairs of boundary faces that share an edge.
+    boundary_planes : (F, 4) float64, ``planes`` of the boundary faces.
+    boundary_spheres : (F, 4) float64, a sphere round each boundary face (centre, radius).
     origin : (3,) float64, the mesh's bounding-box centre.
     convex : the mesh fills a convex region (no ray enters twice).
     """
@@ -101,6 +104,9 @@ class MarchRecords:
     boundary_triangles: NDArray[np.float32]
     boundary_corners: NDArray[np.int64]
     boundary_edges: NDArray[np.int64]
+    boundary_pairs: NDArray[np.int64]
+    boundary_planes: NDArray[np.float64]
+    boundary_spheres: NDArray[np.float64]
     origin: NDArray[np.float64]
     convex: bool
 
@@ -168,10 +174,36 @@ def march_records(mesh: TetMesh) -> MarchRecords:
     slots = 4 * (slots // 4) + new_slot[slots // 4, slots % 4]
     a, b = corners, np.roll(corners, -1, axis=1)
     edge_keys = np.minimum(a, b).astype(np.int64) * mesh.n_points + np.maximum(a, b)
-    return MarchRecords(planes=planes, scalar=scalar, mates=mates.astype(np.int32), ids=ids.astype(np.int32), links=links,
+    centres = tri.astype(np.float64).mean(axis=1)
+    radii = np.sqrt(((tri - centres[:, None]) ** 2).sum(axis=-1)).max(axis=1)
+    spheres = np.concatenate([centres, radii[:, None] * (1 + 1e-6)], axis=1)
+    return MarchRecords(boundary_pairs=_edge_pairs(edge_keys),
+                        boundary_planes=planes[slots // 4, slots % 4].astype(np.float64), boundary_spheres=spheres,planes=planes, scalar=scalar, mates=mates.astype(np.int32), ids=ids.astype(np.int32), links=links,
                         boundary_slots=slots, boundary_triangles=tri.astype(np.float32),
                         boundary_corners=corners.astype(np.int64), boundary_edges=edge_keys, origin=origin,
                         convex=bool(adj.convex))
+
+
+def _edge_pairs(edge_keys: NDArray[np.int64]) -> NDArray[np.int64]:
+    """The pairs of faces (rows of ``edge_keys``) that share an edge key: each pair once."""
+    flat = edge_keys.reshape(-1)
+    order = np.argsort(flat, kind="stable")
+    keys, faces = flat[order], order // 3
+    starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
+    lengths = np.diff(np.r_[starts, keys.size])
+    pairs = [np.stack([faces[starts[lengths >= 2]], faces[starts[lengths >= 2] + 1]], axis=1)]
+    for start, n in zip(starts[lengths > 2], lengths[lengths > 2]):  # non-manifold edges: every pair
+        i, j = np.triu_indices(int(n), 1)  # (0, 1) first, which is in already
+        pairs.append(np.stack([faces[start + i[1:]], faces[start + j[1:]]], axis=1))
+    return np.concatenate(pairs).astype(np.int64)
+
+
+def _grow(mask: NDArray[np.bool_], pairs: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """``mask`` and every face sharing an edge with a face in it."""
+    out = mask.copy()
+    out[pairs[mask[pairs[:, 1]], 0]] = True
+    out[pairs[mask[pairs[:, 0]], 1]] = True
+    return out
 
 
 def folded_faces(mesh: TetMesh) -> int:
@@ -266,23 +298,28 @@ def rim_faces(rec: MarchRecords, camera: Camera, size: tuple[int, int]
     the rasteriser leaves face ``indices[i]`` out.
     """
     width, height = size
-    slots = rec.boundary_slots
-    planes = rec.planes[slots // 4, slots % 4].astype(np.float64)
+    planes = rec.boundary_planes
     tri = rec.boundary_triangles
     view = camera.view_matrix()
     if camera.parallel_projection:
-        sine = np.abs(planes[:, :3] @ view[2, :3])
+        edge_on = np.abs(planes[:, :3] @ view[2, :3]) < EDGE_ON_SINE
     else:
         eye = np.asarray(camera.position, dtype=np.float64) - rec.origin
-        nearest = np.sqrt(((tri - eye.astype(np.float32)) ** 2).sum(axis=-1).min(axis=1)).astype(np.float64)
+        height_ = np.abs(planes[:, :3] @ eye + planes[:, 3])  # the eye's distance to each plane
+        # The sine at the face's nearest corner: only where a sphere round the face could
+        # allow it below EDGE_ON_SINE is that corner found.
+        sphere = rec.boundary_spheres
+        far = np.sqrt(((sphere[:, :3] - eye) ** 2).sum(axis=1)) + sphere[:, 3]
+        edge_on = np.zeros(planes.shape[0], dtype=bool)
+        maybe = np.flatnonzero(height_ < EDGE_ON_SINE * far)
+        nearest = np.sqrt(((tri[maybe] - eye.astype(np.float32)) ** 2).sum(axis=-1).min(axis=1)).astype(np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
-            sine = np.abs(planes[:, :3] @ eye + planes[:, 3]) / nearest
-    edge_on = sine < EDGE_ON_SINE
+            edge_on[maybe] = height_[maybe] / nearest < EDGE_ON_SINE
     if not edge_on.any():
         return np.empty(0, dtype=np.int64), np.empty((0, 4)), np.empty(0, dtype=bool)
-    edges = rec.boundary_edges
-    core = edge_on | np.isin(edges, edges[edge_on]).any(axis=1)
-    idx = np.flatnonzero(core | np.isin(edges, edges[core]).any(axis=1))
+    pairs = rec.boundary_pairs
+    core = _grow(edge_on, pairs)
+    idx = np.flatnonzero(_grow(core, pairs))
     eye_pts = (tri[idx].astype(np.float64) + rec.origin) @ view[:3, :3].T + view[:3, 3]
     if camera.parallel_projection:
         ahead = np.ones(idx.size, dtype=bool)
@@ -290,8 +327,9 @@ def rim_faces(rec: MarchRecords, camera: Camera, size: tuple[int, int]
         ahead = (-eye_pts[..., 2]).min(axis=1) > camera.clipping_range[0]
     exclusive = core[idx] & ahead
     if not ahead.all():  # a face left to the rasteriser keeps its neighbours with it
-        behind = idx[~ahead]
-        exclusive &= ~np.isin(edges[idx], edges[behind]).any(axis=1)
+        behind = np.zeros(planes.shape[0], dtype=bool)
+        behind[idx[~ahead]] = True
+        exclusive &= ~_grow(behind, pairs)[idx]
     idx, eye_pts, exclusive = idx[ahead], eye_pts[ahead], exclusive[ahead]
     proj = camera.projection_matrix(width / height)
     ndc = (eye_pts @ proj[:2, :3].T + proj[:2, 3]) / (eye_pts @ proj[3, :3] + proj[3, 3])[..., None]
