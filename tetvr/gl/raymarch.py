@@ -220,7 +220,7 @@ class Marcher:
         if self._points_eye is not None and np.array_equal(eye, self._points_eye):
             return
         self._points[:mesh.n_points, :3] = mesh.points - eye
-        self._textures[3].write(self._points.tobytes())
+        self._textures[3].write(self._points)
         self._points_eye = eye
 
     # ---- per size ----
