@@ -151,17 +151,19 @@ def march_records(mesh: TetMesh) -> MarchRecords:
     # The records list each tet's points in increasing id (slot k still opposite face k),
     # so the three points of a face come in the same order in both its tets.
     order = np.argsort(tets, axis=1, kind="stable")
-    new_slot = np.empty_like(order)
-    np.put_along_axis(new_slot, order, np.arange(4)[None, :], axis=1)
-    ids = np.take_along_axis(tets, order, axis=1)
-    planes = np.take_along_axis(planes, order[..., None], axis=1)
-    mates = np.take_along_axis(np.asarray(adj.mates, dtype=np.int64), order, axis=1)
-    inner = mates >= 0
-    nbr, there = mates >> 2, new_slot[mates >> 2, mates & 3]
-    mates = np.where(inner, 4 * nbr + there, -1)
+    new_slot = np.argsort(order, axis=1).reshape(-1)  # the inverse permutation, by flat slot
+    flat = (np.arange(mesh.n_tets)[:, None] * 4 + order).reshape(-1)  # new flat slot -> old
+    ids = tets.reshape(-1)[flat].reshape(-1, 4)
+    planes = planes.reshape(-1, 4)[flat].reshape(-1, 4, 4)
+    old_mates = np.asarray(adj.mates, dtype=np.int64).reshape(-1)[flat]
+    inner = old_mates >= 0
+    mates = np.where(inner, (old_mates & ~3) + new_slot[np.maximum(old_mates, 0)], -1)
     links = np.zeros((mesh.n_tets, 4, 4), dtype=np.int32)
-    links[..., 0] = mates
-    links[..., 1] = np.where(inner, ids[nbr, there], -1)
+    links[..., 0] = mates.reshape(-1, 4)
+    links[..., 1] = np.where(inner, ids.reshape(-1)[np.maximum(mates, 0)], -1).reshape(-1, 4)
+    nbr = (np.maximum(mates, 0) >> 2).reshape(-1, 4)
+    inner = inner.reshape(-1, 4)
+    mates = mates.reshape(-1, 4)
     if mesh.cell_scalars is not None:
         cell = np.asarray(mesh.cell_scalars, dtype=np.float32).view(np.int32)
         links[..., 2] = np.where(inner, cell[nbr], 0)
@@ -171,7 +173,7 @@ def march_records(mesh: TetMesh) -> MarchRecords:
                        adj.normals[slots // 4, slots % 4]) < 0
     corners[inward] = corners[inward][:, [0, 2, 1]]
     tri[inward] = tri[inward][:, [0, 2, 1]]
-    slots = 4 * (slots // 4) + new_slot[slots // 4, slots % 4]
+    slots = 4 * (slots // 4) + new_slot[slots]
     a, b = corners, np.roll(corners, -1, axis=1)
     edge_keys = np.minimum(a, b).astype(np.int64) * mesh.n_points + np.maximum(a, b)
     centres = tri.astype(np.float64).mean(axis=1)
