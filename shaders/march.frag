@@ -71,6 +71,8 @@ vec4 segment(float s0, float s1, float len) {
 #endif
 
 uniform int u_max_steps;      // bound on tets per ray and layer (a walk caught by rounding)
+// Most tets a ray walks by face planes before it walks by points (see main).
+#define PLANE_STEPS 8
 uniform float u_opaque;       // stop once alpha reaches this (early ray termination)
 
 layout(location = 0) out vec4 f_color;
@@ -195,61 +197,68 @@ void main() {
     acc.x = min(acc.x, t_in);
 #endif
 
-    // The first tet: the ray leaves it by the nearest of the three faces other than the
-    // one it came in by whose plane it points out of.
+    // The walk by points (Marmitt & Slusallek 2006) sees the points in the plane across the
+    // ray, the ray at its origin: the face the ray came in by is a triangle (a, b, c)
+    // about the origin, counter-clockwise; the tet's fourth point n makes a face with each
+    // of its edges, and the signs of e(a, n), e(b, n), e(c, n) say which one the ray leaves
+    // by. The edge values e of that face are the exit's barycentric weights (its t and its
+    // scalar) and carry over to the next triangle, so the walk always holds a triangle
+    // about the ray, whatever the rounding. A step reads the link across the exit face
+    // and the point it leads to.
+    vec3 dn = normalize(d);
+    vec3 e1 = normalize(abs(dn.x) < 0.6 ? vec3(0.0, -dn.z, dn.y) : vec3(-dn.y, dn.x, 0.0));
+    vec3 e2 = cross(dn, e1);
+    float inv_dd = 1.0 / dot(d, d);
+    vec3 ow = ray_from_eye(gl_FragCoord.xy);
+    int sa, sb, sc;
+    vec2 pa, pb, pc;
+    vec3 ts, ss, E;
+
+    // Until then, by face planes: the first tet (which a ray starting at the near plane
+    // entered by no face) is left by the nearest of the three faces other than the one
+    // it came in by whose plane the ray points out of; and so is each next tet until the
+    // face the ray leaves by holds the ray as seen across it (the rasteriser may give a
+    // grazing ray an entry it misses by a rounding; the walk by planes finds its way back).
     vec4 g = tet_scalar(tet);
     float s_in = dot(g.xyz, o + t_in * d) + g.w;
-    float t_out = t_in;
-    float t_exit = 3.0e38;
-    int exit_face = -1;
-    for (int j = 1; j < 4; ++j) {
-        int k = (face + j) & 3;
-        vec4 plane = face_plane(tet, k);
-        float den = dot(plane.xyz, d);
-        if (den > 0.0) {
-            float t = -(dot(plane.xyz, o) + plane.w) / den;
-            if (t < t_exit) { t_exit = t; exit_face = k; }
+    float t_out = t_in, s_out = s_in;
+    float status = STATUS_DONE;
+    bool by_points = false;
+    ivec4 link;
+    int k = 0;
+    for (int step = 0; step < PLANE_STEPS && step < u_max_steps; ++step) {
+        float t_exit = 3.0e38;
+        int exit_face = -1;
+        for (int j = 1; j < 4; ++j) {
+            int kk = (face + j) & 3;
+            vec4 plane = face_plane(tet, kk);
+            float den = dot(plane.xyz, d);
+            if (den > 0.0) {
+                float t = -(dot(plane.xyz, o) + plane.w) / den;
+                if (t < t_exit) { t_exit = t; exit_face = kk; }
+            }
         }
-    }
-    if (exit_face < 0) {  // no face ahead: only rounding on a degenerate ray does this
-        f_color = acc;
-        f_state = vec2(t_out, STATUS_DONE);
-        return;
-    }
-    t_out = max(t_exit, t_in);
-    float s_out = dot(g.xyz, o + t_out * d) + g.w;
-    if (composite(acc, t_in, s_in, t_out, s_out, win, per_t)) {
-        f_color = acc;
-        f_state = vec2(t_out, STATUS_DONE);
-        return;
-    }
-    ivec4 link = tet_link(tet, exit_face);
-    float status = STATUS_REENTER;
-    if (link.x >= 0) {
-        // The rest of the walk, by points (Marmitt & Slusallek 2006): the points are seen
-        // in the plane across the ray, the ray at its origin. The face the ray came in by
-        // is a triangle (a, b, c) about the origin, counter-clockwise; the tet's fourth
-        // point n makes a face with each of its edges, and the signs of e(a, n), e(b, n),
-        // e(c, n) say which one the ray leaves by. The edge values e of that face are the
-        // exit's barycentric weights (its t and its scalar) and carry over to the next
-        // triangle, so the walk always holds a triangle about the ray, whatever the
-        // rounding. A step reads the link across the exit face and the point it leads to.
-        vec3 dn = normalize(d);
-        vec3 e1 = normalize(abs(dn.x) < 0.6 ? vec3(0.0, -dn.z, dn.y) : vec3(-dn.y, dn.x, 0.0));
-        vec3 e2 = cross(dn, e1);
-        float inv_dd = 1.0 / dot(d, d);
-        vec3 ow = ray_from_eye(gl_FragCoord.xy);
-        // The first tet's three points on the exit face, in slots k + 1, k + 2, k + 3.
-        int k = exit_face;
+        if (exit_face < 0) break;  // no face ahead: only rounding on a degenerate ray does this
+        t_out = max(t_exit, t_in);
+        s_out = dot(g.xyz, o + t_out * d) + g.w;
+        if (composite(acc, t_in, s_in, t_out, s_out, win, per_t)) break;
+        k = exit_face;
+        link = tet_link(tet, k);
+        if (link.x < 0) {
+            status = STATUS_REENTER;
+            break;
+        }
+        // The exit face's three points, in slots k + 1, k + 2, k + 3.
         ivec4 ids = tet_ids(tet);
-        int sa = (k + 1) & 3, sb = (k + 2) & 3, sc = (k + 3) & 3;
+        sa = (k + 1) & 3; sb = (k + 2) & 3; sc = (k + 3) & 3;
         vec4 qa = point_record(ids[sa]), qb = point_record(ids[sb]), qc = point_record(ids[sc]);
         vec3 ra = qa.xyz - ow, rb = qb.xyz - ow, rc = qc.xyz - ow;
-        vec2 pa = vec2(dot(ra, e1), dot(ra, e2)), pb = vec2(dot(rb, e1), dot(rb, e2)),
-             pc = vec2(dot(rc, e1), dot(rc, e2));
-        vec3 ts = vec3(dot(ra, d), dot(rb, d), dot(rc, d)) * inv_dd;
-        vec3 ss = vec3(qa.w, qb.w, qc.w);
-        vec3 E = vec3(cross2(pb, pc), cross2(pc, pa), cross2(pa, pb));
+        pa = vec2(dot(ra, e1), dot(ra, e2));
+        pb = vec2(dot(rb, e1), dot(rb, e2));
+        pc = vec2(dot(rc, e1), dot(rc, e2));
+        ts = vec3(dot(ra, d), dot(rb, d), dot(rc, d)) * inv_dd;
+        ss = vec3(qa.w, qb.w, qc.w);
+        E = vec3(cross2(pb, pc), cross2(pc, pa), cross2(pa, pb));
         if (E.x + E.y + E.z < 0.0) {  // clockwise about the ray: swap b and c
             int i = sb; sb = sc; sc = i;
             vec2 p = pb; pb = pc; pc = p;
@@ -257,6 +266,21 @@ void main() {
             ss = ss.xzy;
             E = -E.xzy;
         }
+        if (min(E.x, min(E.y, E.z)) >= 0.0 || step == PLANE_STEPS - 1) {
+            by_points = true;
+            break;
+        }
+        tet = link.x >> 2;
+        face = link.x & 3;
+        t_in = t_out;
+        g = tet_scalar(tet);
+#if CELL_DATA
+        s_in = g.w;
+#else
+        s_in = s_out;
+#endif
+    }
+    if (by_points) {
         status = STATUS_DONE;
         for (int step = 1; step < u_max_steps; ++step) {
             // Into the next tet by its face f: the slots there of the triangle's points.
