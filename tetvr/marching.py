@@ -29,8 +29,10 @@ Built here once per mesh:
   the neighbour's point opposite that face and, for cell data, the neighbour's scalar;
 * the four face planes, outward unit normal ``n`` and ``w`` with ``n . x + w = 0`` on the
   face (``x`` relative to the mesh's bounding-box centre), and the scalar as an affine
-  function ``s(x) = g . x + c``: the entry passes and each ray's first tet use them (a ray
-  that starts inside a tet, at the near plane, has no triangle yet).
+  function ``s(x) = g . x + c``: the entry passes use them, and so does the walk in each
+  ray's first tet (a ray that starts inside a tet, at the near plane, has no triangle yet)
+  and in the next ones until the face it leaves by holds the ray as seen across it (an
+  entry beside faces seen edge-on may be a cell a grazing ray misses by a rounding).
 
 The points themselves go to the GPU per view, relative to the eye in float64 first, so
 that float32 keeps their precision near the eye wherever the mesh's centre is
