@@ -190,7 +190,17 @@ def test_the_saved_notebook_keeps_a_picture(page, lab):
     end = time.monotonic() + 20
     while path.stat().st_mtime_ns == before and time.monotonic() < end:
         time.sleep(0.1)
-    outputs = json.loads(path.read_text())["cells"][0]["outputs"]
+    # The server writes the file in place: a read just after the time changed can find it
+    # empty or half written (seen on a loaded machine), so read until it parses.
+    while True:
+        try:
+            notebook = json.loads(path.read_text())
+            break
+        except json.JSONDecodeError:
+            if time.monotonic() > end:
+                raise
+            time.sleep(0.1)
+    outputs = notebook["cells"][0]["outputs"]
     pngs = [o["data"]["image/png"] for o in outputs if "image/png" in o.get("data", {})]
     assert pngs, f"no image/png in the saved output: {[sorted(o.get('data', {})) for o in outputs]}"
     png = base64.b64decode(pngs[-1])
