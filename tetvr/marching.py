@@ -76,7 +76,6 @@ class MarchRecords:
     planes : (m, 4, 4) float32, face ``k`` of tet ``t``: ``(n, w)`` with ``n . x + w``
         negative inside (``x`` relative to ``origin``).
     scalar : (m, 4) float32, ``(g, c)`` with ``s(x) = g . x + c``.
-    mates : (m, 4) int32, ``4 * neighbour + k`` across each face, -1 on the boundary.
     ids : (m, 4) int32, each tet's point ids in increasing order: slot ``k`` of every
         record is this point (face ``k`` is opposite it), so the three points of a face are
         in the same order in both its tets.
@@ -99,7 +98,6 @@ class MarchRecords:
 
     planes: NDArray[np.float32]
     scalar: NDArray[np.float32]
-    mates: NDArray[np.int32]
     ids: NDArray[np.int32]
     links: NDArray[np.int32]
     boundary_slots: NDArray[np.int64]
@@ -113,9 +111,15 @@ class MarchRecords:
     convex: bool
 
     @property
+    def mates(self) -> NDArray[np.int32]:
+        """(m, 4) int32, ``4 * neighbour + k`` across each face, -1 on the boundary (the
+        links' first column)."""
+        return self.links[..., 0]
+
+    @property
     def nbytes(self) -> int:
-        return int(self.planes.nbytes + self.scalar.nbytes + self.mates.nbytes + self.ids.nbytes
-                   + self.links.nbytes + self.boundary_triangles.nbytes)
+        return int(sum(f.nbytes for f in (getattr(self, d.name) for d in dataclasses.fields(self))
+                       if isinstance(f, np.ndarray)))
 
 
 def march_records(mesh: TetMesh) -> MarchRecords:
@@ -165,7 +169,6 @@ def march_records(mesh: TetMesh) -> MarchRecords:
     links[..., 1] = np.where(inner, ids.reshape(-1)[np.maximum(mates, 0)], -1).reshape(-1, 4)
     nbr = (np.maximum(mates, 0) >> 2).reshape(-1, 4)
     inner = inner.reshape(-1, 4)
-    mates = mates.reshape(-1, 4)
     if mesh.cell_scalars is not None:
         cell = np.asarray(mesh.cell_scalars, dtype=np.float32).view(np.int32)
         links[..., 2] = np.where(inner, cell[nbr], 0)
@@ -181,10 +184,11 @@ def march_records(mesh: TetMesh) -> MarchRecords:
     centres = tri.astype(np.float64).mean(axis=1)
     radii = np.sqrt(((tri - centres[:, None]) ** 2).sum(axis=-1)).max(axis=1)
     spheres = np.concatenate([centres, radii[:, None] * (1 + 1e-6)], axis=1)
-    return MarchRecords(boundary_pairs=_edge_pairs(edge_keys),
-                        boundary_planes=planes[slots // 4, slots % 4].astype(np.float64), boundary_spheres=spheres,planes=planes, scalar=scalar, mates=mates.astype(np.int32), ids=ids.astype(np.int32), links=links,
-                        boundary_slots=slots, boundary_triangles=tri.astype(np.float32),
-                        boundary_corners=corners.astype(np.int64), boundary_edges=edge_keys, origin=origin,
+    return MarchRecords(planes=planes, scalar=scalar, ids=ids.astype(np.int32), links=links, boundary_slots=slots,
+                        boundary_triangles=tri.astype(np.float32), boundary_corners=corners.astype(np.int64),
+                        boundary_edges=edge_keys, boundary_pairs=_edge_pairs(edge_keys),
+                        boundary_planes=planes[slots // 4, slots % 4].astype(np.float64), boundary_spheres=spheres,
+                        origin=origin,
                         convex=bool(adj.convex))
 
 
@@ -309,16 +313,16 @@ def rim_faces(rec: MarchRecords, camera: Camera, size: tuple[int, int]
         edge_on = np.abs(planes[:, :3] @ view[2, :3]) < EDGE_ON_SINE
     else:
         eye = np.asarray(camera.position, dtype=np.float64) - rec.origin
-        height_ = np.abs(planes[:, :3] @ eye + planes[:, 3])  # the eye's distance to each plane
+        distance = np.abs(planes[:, :3] @ eye + planes[:, 3])  # the eye's distance to each plane
         # The sine at the face's nearest corner: only where a sphere round the face could
         # allow it below EDGE_ON_SINE is that corner found.
         sphere = rec.boundary_spheres
         far = np.sqrt(((sphere[:, :3] - eye) ** 2).sum(axis=1)) + sphere[:, 3]
         edge_on = np.zeros(planes.shape[0], dtype=bool)
-        maybe = np.flatnonzero(height_ < EDGE_ON_SINE * far)
+        maybe = np.flatnonzero(distance < EDGE_ON_SINE * far)
         nearest = np.sqrt(((tri[maybe] - eye.astype(np.float32)) ** 2).sum(axis=-1).min(axis=1)).astype(np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
-            edge_on[maybe] = height_[maybe] / nearest < EDGE_ON_SINE
+            edge_on[maybe] = distance[maybe] / nearest < EDGE_ON_SINE
     if not edge_on.any():
         return np.empty(0, dtype=np.int64), np.empty((0, 4)), np.empty(0, dtype=bool)
     pairs = rec.boundary_pairs

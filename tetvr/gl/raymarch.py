@@ -134,7 +134,7 @@ class Marcher:
         self.ctx = owner.ctx
         self._mesh: TetMesh | None = None
         self._records: MarchRecords | None = None
-        self._textures: list[Any] = []  # planes, ids, links, points
+        self._textures: dict[int, Any] = {}  # texture unit -> records texture
         self._faces: list[Any] = []  # boundary positions, slots
         self._vaos: dict[Any, Any] = {}
         self._targets: dict[tuple[int, int], dict[str, Any]] = {}
@@ -146,14 +146,14 @@ class Marcher:
 
     # ---- ownership ----
     def gl_objects(self) -> list[Any]:
-        objs = [*self._vaos.values(), *self._textures, *self._faces]
+        objs = [*self._vaos.values(), *self._textures.values(), *self._faces]
         for t in self._targets.values():
             objs += list(t.values())
         return objs  # the occlusion query has no release in moderngl: it goes with the context
 
     def forget(self) -> None:
         self._vaos.clear()
-        self._textures, self._faces = [], []
+        self._textures, self._faces = {}, []
         self._targets.clear()
         self._query = None
         self._mesh = self._records = None
@@ -161,7 +161,7 @@ class Marcher:
     def gpu_bytes(self) -> int:
         """Bytes held in the records, boundary buffers and targets."""
         total = sum(b.size for b in self._faces)
-        textures = [*self._textures, *(tex for t in self._targets.values() for name, tex in t.items()
+        textures = [*self._textures.values(), *(tex for t in self._targets.values() for name, tex in t.items()
                                        if "fbo" not in name)]
         for tex in textures:
             texel = 4 if tex.depth else tex.components * int(tex.dtype[1])
@@ -172,7 +172,7 @@ class Marcher:
     def _use_mesh(self, mesh: TetMesh) -> MarchRecords:
         if mesh is self._mesh and self._records is not None:
             return self._records
-        for obj in [*self._vaos.values(), *self._textures, *self._faces]:
+        for obj in [*self._vaos.values(), *self._textures.values(), *self._faces]:
             obj.release()
         self._vaos.clear()
         rec = march_records(mesh)
@@ -204,8 +204,10 @@ class Marcher:
         self._points = np.zeros((-(-mesh.n_points // layout.items) * layout.items, 4), dtype=np.float32)
         self._points[:mesh.n_points, 3] = mesh.scalars
         self._points_eye = None
-        self._textures = [texture(planes, layout.planes, RECORD_TEXELS, 0.0), texture(rec.ids, layout.items, 1, 0),
-                          texture(rec.links, layout.links, 4, -1), texture(self._points, layout.items, 1, 0.0)]
+        self._textures = {PLANES_UNIT: texture(planes, layout.planes, RECORD_TEXELS, 0.0),
+                          IDS_UNIT: texture(rec.ids, layout.items, 1, 0),
+                          LINKS_UNIT: texture(rec.links, layout.links, 4, -1),
+                          POINTS_UNIT: texture(self._points, layout.items, 1, 0.0)}
         pos = self.ctx.buffer(np.ascontiguousarray(rec.boundary_triangles, dtype=np.float32).tobytes())
         slots = self.ctx.buffer(np.repeat(rec.boundary_slots.astype(np.int32), 3).tobytes())
         self._faces = [pos, slots]
@@ -220,7 +222,7 @@ class Marcher:
         if self._points_eye is not None and np.array_equal(eye, self._points_eye):
             return
         self._points[:mesh.n_points, :3] = mesh.points - eye
-        self._textures[3].write(self._points)
+        self._textures[POINTS_UNIT].write(self._points)
         self._points_eye = eye
 
     # ---- per size ----
@@ -272,12 +274,12 @@ class Marcher:
         view = np.asarray(uniforms["u_view"], dtype=np.float64)
         common = dict(u_view=view, u_proj=uniforms["u_proj"], u_inv_view=np.linalg.inv(view),
                       u_ray_scale=uniforms["u_ray_scale"], u_viewport=(float(size[0]), float(size[1])),
-                      u_near=uniforms["u_near"], u_far=uniforms["u_far"], u_planes=PLANES_UNIT, u_ids=IDS_UNIT, u_links=LINKS_UNIT,
-                      u_points=POINTS_UNIT,
+                      u_near=uniforms["u_near"], u_far=uniforms["u_far"], u_planes=PLANES_UNIT, u_ids=IDS_UNIT,
+                      u_links=LINKS_UNIT, u_points=POINTS_UNIT,
                       u_tolerance=1e-6 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])))
         t = self._target(size)
         self._write_points(mesh, rec, common["u_inv_view"])
-        for unit, tex in zip((PLANES_UNIT, IDS_UNIT, LINKS_UNIT, POINTS_UNIT), self._textures):
+        for unit, tex in self._textures.items():
             tex.use(unit)
         ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
 
