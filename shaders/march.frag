@@ -112,6 +112,12 @@ bool composite(inout vec4 acc, float t_in, float s_in, inout float t_out, inout 
 #endif
 }
 
+// A point at r from the ray's origin, seen across the ray: (its place in the plane across
+// the ray, axes e1 and e2; its ray parameter t).
+vec3 across(vec3 r, vec3 e1, vec3 e2, vec3 d, float inv_dd) {
+    return vec3(dot(r, e1), dot(r, e2), dot(r, d) * inv_dd);
+}
+
 // e(p, q): the turn from p to q about the origin of the plane across the ray.
 float cross2(vec2 p, vec2 q) {
     return p.x * q.y - p.y * q.x;
@@ -252,11 +258,12 @@ void main() {
         ivec4 ids = tet_ids(tet);
         sa = (k + 1) & 3; sb = (k + 2) & 3; sc = (k + 3) & 3;
         vec4 qa = point_record(ids[sa]), qb = point_record(ids[sb]), qc = point_record(ids[sc]);
-        vec3 ra = qa.xyz - ow, rb = qb.xyz - ow, rc = qc.xyz - ow;
-        pa = vec2(dot(ra, e1), dot(ra, e2));
-        pb = vec2(dot(rb, e1), dot(rb, e2));
-        pc = vec2(dot(rc, e1), dot(rc, e2));
-        ts = vec3(dot(ra, d), dot(rb, d), dot(rc, d)) * inv_dd;
+        vec3 a = across(qa.xyz - ow, e1, e2, d, inv_dd), b = across(qb.xyz - ow, e1, e2, d, inv_dd),
+             c = across(qc.xyz - ow, e1, e2, d, inv_dd);
+        pa = a.xy;
+        pb = b.xy;
+        pc = c.xy;
+        ts = vec3(a.z, b.z, c.z);
         ss = vec3(qa.w, qb.w, qc.w);
         E = vec3(cross2(pb, pc), cross2(pc, pa), cross2(pa, pb));
         if (E.x + E.y + E.z < 0.0) {  // clockwise about the ray: swap b and c
@@ -296,9 +303,9 @@ void main() {
             s_in = s_out;
 #endif
             vec4 qn = point_record(link.y);  // the point across face f
-            vec3 rn = qn.xyz - ow;
-            vec2 pn = vec2(dot(rn, e1), dot(rn, e2));
-            float tn = dot(rn, d) * inv_dd;
+            vec3 n = across(qn.xyz - ow, e1, e2, d, inv_dd);
+            vec2 pn = n.xy;
+            float tn = n.z;
             float fa = cross2(pa, pn), fb = cross2(pb, pn), fc = cross2(pc, pn);
             // Out by (b, c, n) if e(b, n) <= 0 < e(c, n); by (c, a, n) if e(c, n) <= 0 < e(a, n);
             // else by (a, b, n). The next triangle keeps the counter-clockwise turn.
