@@ -1,11 +1,11 @@
 // march_common.glsl -- what the tet-marching ray caster's passes share: the per-tet
-// records (tetvr/marching.py) read with texelFetch, and each pixel's ray.
+// records (tetvr/marching.py) read with imageLoad, and each pixel's ray.
 //
 // Coordinate spaces: *_obj mesh coordinates relative to the mesh's bounding-box centre (as
 // the records), eye space as in common.glsl. Ray parameter t = eye depth along the view axis
 // (the ray's direction has eye z = -1), so the clipping range compares with t directly and
 // a segment's world length is (t1 - t0) * length(d).
-// Records: u_planes (RGBA32F) holds RECORD_TEXELS texels per tet, 2^TETS_ROW_SHIFT tets a row:
+// Records (images, bound read-only to units PLANES_IMAGE ... POINTS_IMAGE): u_planes (RGBA32F) holds RECORD_TEXELS texels per tet, 2^TETS_ROW_SHIFT tets a row:
 // texels 0..3 the face planes (n, w), n . x_obj + w < 0 inside, n the outward unit normal;
 // texel 4 the scalar (g, c), s = g . x_obj + c. Slot k of a tet is its k-th point in
 // increasing id, face k the face opposite it. u_links (RGBA32I), four texels a tet,
@@ -15,16 +15,16 @@
 // to the eye, written per view; scalar), 2^ITEMS_ROW_SHIFT a row.
 // Defines: PERSPECTIVE, TETS_ROW_SHIFT, LINKS_ROW_SHIFT, ITEMS_ROW_SHIFT (powers of two:
 // llvmpipe has no vector integer division, a shift and a mask are one instruction per
-// lane; tetvr.gl.raymarch chooses them).
+// lane; tetvr.gl.raymarch chooses them), PLANES_IMAGE, IDS_IMAGE, LINKS_IMAGE, POINTS_IMAGE.
 
 #define RECORD_TEXELS 5
 #define STATUS_DONE 0.0
 #define STATUS_REENTER 1.0   // the ray left the mesh: look for the next entry (peel)
 
-uniform sampler2D u_planes;
-uniform isampler2D u_ids;
-uniform isampler2D u_links;
-uniform sampler2D u_points;
+layout(binding = PLANES_IMAGE, rgba32f) restrict readonly uniform image2D u_planes;
+layout(binding = IDS_IMAGE, rgba32i) restrict readonly uniform iimage2D u_ids;
+layout(binding = LINKS_IMAGE, rgba32i) restrict readonly uniform iimage2D u_links;
+layout(binding = POINTS_IMAGE, rgba32f) restrict readonly uniform image2D u_points;
 uniform mat4 u_inv_view;    // eye -> obj
 uniform vec2 u_ray_scale;   // NDC -> eye x, y per unit depth (perspective) or eye x, y (parallel)
 uniform vec2 u_viewport;    // pixels
@@ -37,26 +37,26 @@ ivec2 tet_record(int tet) {
 }
 
 vec4 face_plane(int tet, int k) {
-    return texelFetch(u_planes, tet_record(tet) + ivec2(k, 0), 0);
+    return imageLoad(u_planes, tet_record(tet) + ivec2(k, 0));
 }
 
 vec4 tet_scalar(int tet) {
-    return texelFetch(u_planes, tet_record(tet) + ivec2(4, 0), 0);
+    return imageLoad(u_planes, tet_record(tet) + ivec2(4, 0));
 }
 
 // The tet's four point ids, increasing, slot k opposite face k.
 ivec4 tet_ids(int tet) {
-    return texelFetch(u_ids, ivec2(tet & ((1 << ITEMS_ROW_SHIFT) - 1), tet >> ITEMS_ROW_SHIFT), 0);
+    return imageLoad(u_ids, ivec2(tet & ((1 << ITEMS_ROW_SHIFT) - 1), tet >> ITEMS_ROW_SHIFT));
 }
 
 // A point's (position relative to the eye, scalar); tetvr.gl.raymarch writes them per view.
 vec4 point_record(int p) {
-    return texelFetch(u_points, ivec2(p & ((1 << ITEMS_ROW_SHIFT) - 1), p >> ITEMS_ROW_SHIFT), 0);
+    return imageLoad(u_points, ivec2(p & ((1 << ITEMS_ROW_SHIFT) - 1), p >> ITEMS_ROW_SHIFT));
 }
 
 // The link across the tet's face k (see Records above).
 ivec4 tet_link(int tet, int k) {
-    return texelFetch(u_links, ivec2(((tet & ((1 << LINKS_ROW_SHIFT) - 1)) << 2) + k, tet >> LINKS_ROW_SHIFT), 0);
+    return imageLoad(u_links, ivec2(((tet & ((1 << LINKS_ROW_SHIFT) - 1)) << 2) + k, tet >> LINKS_ROW_SHIFT));
 }
 
 
