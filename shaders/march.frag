@@ -8,7 +8,13 @@
 //      and f_last. Records and rays: march_common.glsl.
 // Out: f_color premultiplied RGBA so far; f_state = (t where the walk stopped, status:
 //      STATUS_REENTER if the ray left the mesh and may enter again, else STATUS_DONE);
-//      f_last the entry this pass started from (the next peel skips it).
+//      f_last the entry this pass started from (the next peel skips it); with LIST, the
+//      entry the next pass starts from instead.
+// LIST 1: instead of a peel pass, where the ray left the mesh this pass picks its next entry
+// from the faces the first entry pass listed for the pixel (march_entry.frag: by the peel's
+// rule, the nearest not before where the ray left, less a rounding, nor the face it entered
+// by; ties to the lower slot), leaves it in f_last and counts the pixel in u_more; the next
+// pass starts there. (tetvr.gl.raymarch uses the list where no pixel's overflowed.)
 // Defines: CELL_DATA 1 (the records' scalars are cell constants: g = (0, c), and the scalar
 // is not carried across faces), FIRST (the first layer), EXTENT 1 (instead of colour, f_color = (eye depth of
 // the first entry, of the last exit, segments walked, 0): the ray limits for fusion with a
@@ -70,6 +76,12 @@ vec4 segment(float s0, float s1, float len) {
 }
 #endif
 
+#if LIST
+layout(binding = COUNT_IMAGE, r32ui) restrict readonly uniform uimage2D u_count;
+layout(binding = LIST_IMAGE, rg32i) restrict readonly uniform iimage2D u_list;
+layout(std430, binding = MORE_BUFFER) restrict buffer More { uint u_more; };
+uniform float u_tolerance;
+#endif
 uniform int u_max_steps;      // bound on tets per ray and layer (a walk caught by rounding)
 // Most tets a ray walks by face planes before it walks by points (see main).
 #define PLANE_STEPS 8
@@ -152,9 +164,14 @@ void main() {
     }
 #endif
     f_color = acc;
+#if LIST && !FIRST
+    int entry = f_last;  // picked by the last pass
+    f_last = -1;
+#else
     if (texelFetch(u_entry_depth, px, 0).r >= 1.0) return;  // no (further) entry
     int entry = texelFetch(u_entry, px, 0).r;
     f_last = entry;
+#endif
 
 #if RAY_WINDOW
     vec2 win = ray_window((gl_FragCoord.xy / u_viewport * 2.0 - 1.0) * u_ray_scale, px, u_near, u_far);
@@ -346,6 +363,25 @@ void main() {
             if (den > 0.0) t_out = max(-(dot(plane.xyz, o) + plane.w) / den, t_in);
         }
     }
+#if LIST
+    f_last = -1;
+    if (status == STATUS_REENTER) {
+        uint n = min(imageLoad(u_count, px).x, uint(LIST_LENGTH));
+        float t_min = t_out - u_tolerance * per_t;  // as march_entry.frag's peel
+        float t_next = 3.0e38;
+        for (uint i = 0u; i < n; ++i) {
+            ivec2 e = imageLoad(u_list, ivec2(px.x, px.y + int(i) * int(u_viewport.y))).xy;
+            float t = intBitsToFloat(e.x);
+            bool nearer = t < t_next || (t == t_next && e.y < f_last);
+            if (e.y != entry && t >= t_min && nearer) {
+                t_next = t;
+                f_last = e.y;
+            }
+        }
+        if (f_last >= 0) atomicAdd(u_more, 1u);
+        else status = STATUS_DONE;
+    }
+#endif
     f_color = acc;
     f_state = vec2(t_out, status);
 }

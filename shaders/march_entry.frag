@@ -11,6 +11,10 @@
 // drawn as a rectangle round its projection (tetvr.marching.rim_faces), whose fragments
 // are kept only where the pixel's ray, in float64, enters the triangle v_c0..2 (wound
 // counter-clockwise seen from outside; Moller-Trumbore, closed, as the reference decides).
+// LIST 1 (the first layer's faces, not PEEL): every face that passes is also listed for the
+// pixel, (t's float bits, v_id), up to LIST_LENGTH of them (u_list: entry i of pixel (x, y)
+// at (x, y + i * height); u_count their number, counted on past the length: u_overflow
+// counts the pixels that overflowed), for march.frag to pick the next entry from.
 // Out: f_entry: 4 * tet + k for a face, -2 - tet for a cut cell; gl_FragDepth: t mapped to
 // [0, 1] over the clipping range.
 
@@ -43,6 +47,11 @@ uniform sampler2D u_state;   // march.frag's f_state: (t where the ray left, sta
 uniform isampler2D u_last;   // march.frag's f_last: the entry slot of the last march
 #endif
 uniform float u_tolerance;   // length: rounding allowance of the peel and the inside test
+#if LIST
+layout(binding = COUNT_IMAGE, r32ui) restrict uniform uimage2D u_count;
+layout(binding = LIST_IMAGE, rg32i) restrict writeonly uniform iimage2D u_list;
+layout(std430, binding = OVERFLOW_BUFFER) restrict buffer Overflow { uint u_overflow; };
+#endif
 
 void main() {
     vec3 o, d;
@@ -78,6 +87,13 @@ void main() {
     vec2 state = texelFetch(u_state, px, 0).xy;
     if (state.y != STATUS_REENTER || v_id == texelFetch(u_last, px, 0).r) discard;
     if (t < state.x - u_tolerance * length(d)) discard;
+#endif
+#if LIST
+    ivec2 at = ivec2(gl_FragCoord.xy);
+    uint i = imageAtomicAdd(u_count, at, 1u);
+    if (i < uint(LIST_LENGTH)) imageStore(u_list, ivec2(at.x, at.y + int(i) * int(u_viewport.y)),
+                                          ivec4(floatBitsToInt(t), v_id, 0, 0));
+    else if (i == uint(LIST_LENGTH)) atomicAdd(u_overflow, 1u);
 #endif
     f_entry = v_id;
     gl_FragDepth = (t - u_near) / (u_far - u_near);

@@ -95,6 +95,40 @@ def test_convex_mesh_needs_one_layer_and_rings_need_several(marcher):
     assert not marcher._marcher.last_stats.layers_exhausted
 
 
+@pytest.mark.parametrize("parallel", [False, True], ids=["perspective", "parallel"])
+@pytest.mark.parametrize("scene", ["torus", "rings", "separate_parts"])
+def test_layers_from_the_entry_list_and_from_peeling_agree(marcher, scene, parallel, monkeypatch):
+    """Each further entry picked by the march from the first entry pass's list is the one a
+    peel pass finds: a one-face list overflows wherever a ray meets two front faces, and
+    then the frame peels."""
+    import tetvr.gl.raymarch as raymarch
+
+    mesh = SCENES[scene]()
+    direction = (1.6, 0.3, -0.8) if scene == "separate_parts" else (-0.3, -0.5, -1.0)  # rays through both parts
+    cam = Camera.fit(mesh, direction=direction, parallel=parallel)
+    listed, _ = _compare(marcher, f"listed_{scene}", mesh, cam, _tf(mesh))
+    assert marcher._marcher.last_stats.entry_list and marcher._marcher.last_stats.layers >= 2
+    monkeypatch.setattr(raymarch, "LIST_LENGTH", 1)
+    with tetvr.Renderer(RenderSettings(method="raymarch")) as r:
+        peeled, _ = _compare(r, f"peeled_{scene}", mesh, cam, _tf(mesh))
+        assert not r._marcher.last_stats.entry_list
+    assert np.abs(listed - peeled).max() <= 1e-6
+
+
+def test_rays_through_more_faces_than_the_list_holds_peel(marcher):
+    """Ten cubes one behind the other: the rays through all of them meet ten front faces,
+    more than the list holds, and the frame peels them all."""
+    from tetvr.gl.raymarch import LIST_LENGTH
+
+    cube = synthetic.cube(2)
+    mesh = synthetic.merge(*[tetvr.TetMesh(cube.points * 0.5 + np.array([0.0, 0.0, 0.8 * i]), cube.tets,
+                                           cube.scalars + i) for i in range(LIST_LENGTH + 2)])
+    cam = Camera.fit(mesh, direction=(0.02, 0.03, -1.0))
+    _compare(marcher, "many_layers", mesh, cam, _tf(mesh, units=40.0))
+    stats = marcher._marcher.last_stats
+    assert not stats.entry_list and stats.layers > LIST_LENGTH and not stats.layers_exhausted
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_random_cameras_inside_and_around(marcher, seed):
     """Eye inside the mesh, near plane cutting cells, parallel views: every ray that starts

@@ -39,8 +39,9 @@ that float32 keeps their precision near the eye wherever the mesh's centre is
 (:mod:`tetvr.gl.raymarch`).
 
 Rays enter the mesh at front-facing boundary faces; where the mesh is not convex a ray may
-leave and enter again, and each further entry is found by peeling the boundary at the
-last exit (:mod:`tetvr.gl.raymarch`). Rays that start inside the mesh -- the eye inside,
+leave and enter again, and each further entry is the nearest boundary face behind the
+last exit, picked from a list of the pixel's faces or found by peeling the boundary there
+(:mod:`tetvr.gl.raymarch`). Rays that start inside the mesh -- the eye inside,
 the near plane cutting cells -- start in the tet that holds the ray's point on the near
 plane: :func:`near_plane_cells` lists the tets the near plane cuts and where they project.
 """
