@@ -3,9 +3,12 @@
 // pixel's ray walks from tet to tet through shared faces, integrating one exact segment per
 // tet by a lookup in the pre-integration table (lookup.glsl), composited front to back.
 //
-// In:  u_entry_depth / u_entry (march_entry.frag: depth 1 where no entry; 4 * tet + k or
-//      -2 - tet), and, after the first layer (FIRST 0), the last march's f_color, f_state
-//      and f_last. Records and rays: march_common.glsl.
+// In:  u_entry (march_entry.frag: 4 * tet + k or -2 - tet; NO_ENTRY where none), and,
+//      after the first layer (FIRST 0), the last march's f_color, f_state and f_last.
+//      Records and rays: march_common.glsl.
+// Runs where the depth test passes (early, before the shader: tetvr.gl.raymarch draws it
+// at the far end of the depth range against the entry depths, or against the pixels a
+// mark pass left for it), so that pixels no ray enters cost nothing.
 // Out: f_color premultiplied RGBA so far; f_state = (t where the walk stopped, status:
 //      STATUS_REENTER if the ray left the mesh and may enter again, else STATUS_DONE);
 //      f_last the entry this pass started from (the next peel skips it); with LIST, the
@@ -45,7 +48,8 @@
 #include "lookup.glsl"
 #endif
 
-uniform sampler2D u_entry_depth;
+layout(early_fragment_tests) in;  // the depth test chooses the pixels: before the shader runs
+
 uniform isampler2D u_entry;
 #if !FIRST
 uniform sampler2D u_color_in;
@@ -168,8 +172,8 @@ void main() {
     int entry = f_last;  // picked by the last pass
     f_last = -1;
 #else
-    if (texelFetch(u_entry_depth, px, 0).r >= 1.0) return;  // no (further) entry
     int entry = texelFetch(u_entry, px, 0).r;
+    if (entry == NO_ENTRY) return;  // no (further) entry
     f_last = entry;
 #endif
 

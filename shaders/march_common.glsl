@@ -20,6 +20,7 @@
 #define RECORD_TEXELS 5
 #define STATUS_DONE 0.0
 #define STATUS_REENTER 1.0   // the ray left the mesh: look for the next entry (peel)
+#define NO_ENTRY (-1)        // the entry target where no face or cut cell was drawn
 
 layout(binding = PLANES_IMAGE, rgba32f) restrict readonly uniform image2D u_planes;
 layout(binding = IDS_IMAGE, rgba32i) restrict readonly uniform iimage2D u_ids;

@@ -219,6 +219,7 @@ class Renderer(GLOwner):
                     "depth": {"vertex_shader": "tet.vert", "fragment_shader": "depth.frag"},
                     "march_entry": {"vertex_shader": "march_entry.vert", "fragment_shader": "march_entry.frag"},
                     "march": {"vertex_shader": "raycast.vert", "fragment_shader": "march.frag"},
+                    "march_mark": {"vertex_shader": "raycast.vert", "fragment_shader": "march_mark.frag"},
                     "surface": {"vertex_shader": "surface.vert", "fragment_shader": "surface.frag"}}
         if kind not in programs:
             raise ValueError(f"unknown shader {kind!r}; choose one of {sorted(programs)}")
