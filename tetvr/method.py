@@ -26,12 +26,12 @@ __all__ = ["choose", "segments_per_tet", "RAYMARCH_ONLY", "PROJECTED_ONLY", "CRO
 
 #: The measured cost model on llvmpipe at 512x512 (bench/results/stages.json, six meshes of
 #: 10k to 1M tets, wall time per frame; least squares): projected tetrahedra pay
-#: ~1.1 us per tet plus ~20.5 ns per fragment, tet marching ~18.6 ns per ray--tet segment
+#: ~1.1 us per tet plus ~20.5 ns per fragment, tet marching ~16.1 ns per ray--tet segment
 #: (its march time; a fragment of projected tetrahedra is one segment) plus its boundary
-#: passes (4-26 ms).
+#: pass (7-18 ms).
 PROJECTED_NS_PER_TET = 1125.0
 PROJECTED_NS_PER_FRAGMENT = 20.5
-MARCH_NS_PER_SEGMENT = 18.6
+MARCH_NS_PER_SEGMENT = 16.1
 #: "auto" takes projected tetrahedra for speed only where they are predicted this much
 #: faster: large cells seen close up are where a cell order and degenerate projections
 #: cost projected tetrahedra accuracy (the stability suite, tests/test_near_plane_fuzz.py),
