@@ -187,6 +187,21 @@ def test_projected_and_raymarch_agree_where_both_are_exact():
     assert np.count_nonzero(diff > 5e-4) <= 4
 
 
+def test_records_built_beside_the_table_are_taken_or_dropped():
+    """A new mesh's records are built in the background while the table is: the ray caster
+    takes them; where the choice is projected tetrahedra (here an 8-bit target), they go."""
+    mesh = synthetic.cube(3)
+    cam = Camera.fit(mesh)
+    with tetvr.Renderer(RenderSettings()) as r:
+        first = r.render(mesh, cam, _tf(mesh), size=(24, 24))
+        assert r._marcher._prefetch is None and r._marcher._records is not None
+        again = r.render(mesh, cam, _tf(mesh), size=(24, 24))
+        assert np.array_equal(first, again)
+    with tetvr.Renderer(RenderSettings(framebuffer="uint8")) as r:
+        r.render(mesh, cam, _tf(mesh), size=(24, 24))
+        assert r._marcher is not None and r._marcher._prefetch is None and r._marcher._records is None
+
+
 def test_method_setting():
     with pytest.raises(ValueError, match="method must be one of"):
         RenderSettings(method="marching")

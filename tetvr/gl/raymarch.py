@@ -33,6 +33,7 @@ layer and neither.
 from __future__ import annotations
 
 import dataclasses
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -76,6 +77,17 @@ COUNT_IMAGE, LIST_IMAGE, OVERFLOW_BUFFER, MORE_BUFFER = 4, 5, 0, 1
 #: march passes pick each further entry themselves: no peel pass rasterises the boundary
 #: again, and none runs to find that no ray enters again.
 LIST_LENGTH = 8
+
+#: One background thread builds a new mesh's face adjacency and records while the
+#: renderer builds the frame's table (both numpy, which lets go of the GIL in its loops):
+#: the first frame overlaps the two instead of adding them.
+_PREFETCH = ThreadPoolExecutor(max_workers=1, thread_name_prefix="tetvr-records")
+
+
+def _records(mesh: TetMesh) -> tuple[MarchRecords, int]:
+    """The records of ``mesh`` and its folded faces (:func:`~tetvr.marching.folded_faces`)."""
+    folds = folded_faces(mesh)
+    return march_records(mesh), folds
 
 
 @dataclasses.dataclass(frozen=True)
@@ -168,6 +180,7 @@ class Marcher:
         self._targets: dict[tuple[int, int], dict[str, Any]] = {}
         self._query: Any = None
         self._counters: list[Any] = []  # the overflow and more counters (LIST)
+        self._prefetch: tuple[TetMesh, Future[tuple[MarchRecords, int]]] | None = None
         self._shifts: dict[str, int] = {}
         self._points: NDArray[np.float32] = np.zeros((0, 4), dtype=np.float32)
         self._points_eye: NDArray[np.float64] | None = None
@@ -186,6 +199,7 @@ class Marcher:
         self._targets.clear()
         self._query = None
         self._mesh = self._records = None
+        self._prefetch = None
 
     def gpu_bytes(self) -> int:
         """Bytes held in the records, boundary buffers and targets."""
@@ -198,14 +212,28 @@ class Marcher:
         return int(total)
 
     # ---- per mesh ----
+    def prefetch(self, mesh: TetMesh) -> None:
+        """Start building ``mesh``'s records in the background (unless held or under way)."""
+        if (mesh is self._mesh and self._records is not None) or (self._prefetch and self._prefetch[0] is mesh):
+            return
+        self._prefetch = (mesh, _PREFETCH.submit(_records, mesh))
+
+    def settle(self, mesh: TetMesh, keep: bool) -> None:
+        """Wait for a prefetch of ``mesh`` (its face adjacency is then cached), and drop it
+        unless ``keep`` (the mesh goes to projected tetrahedra)."""
+        if self._prefetch is not None and self._prefetch[0] is mesh:
+            self._prefetch[1].exception()  # waits; an error is raised where the records are taken
+            if not keep:
+                self._prefetch = None
+
     def _use_mesh(self, mesh: TetMesh) -> MarchRecords:
         if mesh is self._mesh and self._records is not None:
             return self._records
         for obj in [*self._vaos.values(), *self._textures.values(), *self._faces]:
             obj.release()
         self._vaos.clear()
-        rec = march_records(mesh)
-        folds = folded_faces(mesh)
+        pending, self._prefetch = self._prefetch, None
+        rec, folds = pending[1].result() if pending is not None and pending[0] is mesh else _records(mesh)
         if folds:
             from .._checks import warn
 

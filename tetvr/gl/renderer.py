@@ -521,6 +521,8 @@ class Renderer(GLOwner):
             return self._render_vtk(mesh, camera, tf, size, order)
         if shader == "tet" and self.settings.integration == "exact":
             return self._raymarch_exact(mesh, camera, tf, size, order, window)
+        if shader == "tet" and order is None and self.settings.method != "projected":
+            self._march.prefetch(mesh)  # a new mesh's records, while the table is built
         table = self.table(mesh, tf)
         self._use_table(table)
         self._clock.lap("table")
@@ -620,7 +622,11 @@ class Renderer(GLOwner):
         """Whether frames of this mesh go to the tet-marching ray caster: what
         :func:`tetvr.method.choose` says, unless the records would not fit one texture of
         this GL (then projected tetrahedra, which draw in chunks)."""
+        if self._marcher is not None:
+            self._marcher.settle(mesh, keep=True)  # the adjacency choose() reads, built in the background
         if choose(self.settings, mesh, camera, size) != "raymarch":
+            if self._marcher is not None:
+                self._marcher.settle(mesh, keep=False)
             return False
         fits = mesh.n_tets <= raymarch_capacity(int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384)))
         if not fits and self.settings.method == "raymarch":
