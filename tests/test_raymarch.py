@@ -113,6 +113,11 @@ def test_layers_from_the_entry_list_and_from_peeling_agree(marcher, scene, paral
         peeled, _ = _compare(r, f"peeled_{scene}", mesh, cam, _tf(mesh))
         assert not r._marcher.last_stats.entry_list
     assert np.abs(listed - peeled).max() <= 1e-6
+    monkeypatch.setattr(raymarch, "LIST_LENGTH", 8)
+    monkeypatch.setattr(raymarch, "LIST_MAX_BYTES", 80 * 80 * 68 - 1)  # a frame too large for the list peels
+    with tetvr.Renderer(RenderSettings(method="raymarch")) as r:
+        assert np.array_equal(r.render(mesh, cam, _tf(mesh), size=(80, 80)), peeled)
+        assert not r._marcher.last_stats.entry_list
 
 
 def test_rays_through_more_faces_than_the_list_holds_peel(marcher):

@@ -77,6 +77,9 @@ COUNT_IMAGE, LIST_IMAGE, OVERFLOW_BUFFER, MORE_BUFFER = 4, 5, 0, 1
 #: march passes pick each further entry themselves: no peel pass rasterises the boundary
 #: again, and none runs to find that no ray enters again.
 LIST_LENGTH = 8
+#: Most bytes the list may hold (its count and LIST_LENGTH faces a pixel, 68 B): a larger
+#: frame (above about 1400x1400) peels instead.
+LIST_MAX_BYTES = 128 << 20
 
 #: One background thread builds a new mesh's face adjacency and records while the
 #: renderer builds the frame's table (both numpy, which lets go of the GIL in its loops):
@@ -508,9 +511,11 @@ class Marcher:
 
     def _start_list(self, t: dict[str, Any], rec: MarchRecords) -> bool:
         """Clear and bind the first entry pass's list (march_entry.frag, LIST); False where
-        no list is kept: a convex mesh (no ray enters twice), or a frame too tall for one."""
+        no list is kept: a convex mesh (no ray enters twice), or a frame too tall for one or
+        larger than :data:`LIST_MAX_BYTES` allows."""
         width, height = t["entry"].size
-        if rec.convex or height * LIST_LENGTH > int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384)):
+        if (rec.convex or height * LIST_LENGTH > int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
+                or width * height * (4 + 8 * LIST_LENGTH) > LIST_MAX_BYTES):
             return False
         if "count" not in t:  # LIST_LENGTH rows of pixels
             t["count"] = self.ctx.texture((width, height), 1, dtype="u4")
