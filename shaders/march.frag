@@ -3,8 +3,9 @@
 // pixel's ray walks from tet to tet through shared faces, integrating one exact segment per
 // tet by a lookup in the pre-integration table (lookup.glsl), composited front to back.
 //
-// In:  u_entry (march_entry.frag: 4 * tet + k or -2 - tet; NO_ENTRY where none), and,
-//      after the first layer (FIRST 0), the last march's f_color, f_state and f_last.
+// In:  u_entry (march_entry.frag: 4 * tet + k or -2 - tet; after a peel, NO_ENTRY where
+//      none: the first layer's pass runs only where an entry was drawn), and, after the
+//      first layer (FIRST 0), the last march's f_color, f_state and f_last.
 //      Records and rays: march_common.glsl.
 // Runs where the depth test passes (early, before the shader: tetvr.gl.raymarch draws it
 // at the far end of the depth range against the entry depths, or against the pixels a

@@ -156,9 +156,9 @@ class _Rim:
 @dataclasses.dataclass(frozen=True)
 class MarchStats:
     """Layers the last ray-cast frame needed (1 for a convex mesh), whether rays were
-    cut off at :data:`MAX_LAYERS`, whether the layers after the first started from the
-    first entry pass's list (else from peel passes: a pixel overflowed the list, or the
-    frame is too tall for one), the cells the near plane cut and the boundary faces
+    cut off at :data:`MAX_LAYERS`, whether the first entry pass kept a list for the layers
+    after the first (not for a convex mesh; else they peel: a pixel overflowed the list,
+    or the frame is too tall or too large for one), the cells the near plane cut and the boundary faces
     whose entries were decided by a float64 ray-triangle test beside faces seen edge-on
     (:func:`~tetvr.marching.rim_faces`)."""
 
@@ -349,7 +349,6 @@ class Marcher:
         near_ids, rects = near_plane_cells(mesh, camera, size[0] / size[1])
         t["fbo_a"].clear(*((3.0e38, -3.0e38, 0.0, 0.0) if defines.get("EXTENT") else (0.0, 0.0, 0.0, 0.0)),
                          depth=1.0)
-        self._clear_entries(t)
         t["entry_fbo"].use()
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.depth_func = "<"
@@ -374,6 +373,10 @@ class Marcher:
         if listed:
             ctx.memory_barrier()
             listed = self._counters[0].read() == b"\0" * 4  # no pixel overflowed the list: use it
+        if listed:  # for the march passes to read
+            self._counters[1].bind_to_storage_buffer(MORE_BUFFER)
+            t["count"].bind_to_image(COUNT_IMAGE, read=True, write=False)
+            t["list"].bind_to_image(LIST_IMAGE, read=True, write=False)
         clock.lap("entry")
 
         march_defines = dict(defines, **self._shifts, PERSPECTIVE=perspective, CELL_DATA=int(mesh.cell_data),
@@ -388,9 +391,6 @@ class Marcher:
             self._set(march, {**common, **table_uniforms, **samplers, **steps})
             if listed:
                 self._counters[1].write(b"\0" * 4)
-                self._counters[1].bind_to_storage_buffer(MORE_BUFFER)
-                t["count"].bind_to_image(COUNT_IMAGE, read=True, write=False)
-                t["list"].bind_to_image(LIST_IMAGE, read=True, write=False)
             if window is not None:
                 window.bind(march)
             t["entry"].use(4)
@@ -402,7 +402,7 @@ class Marcher:
             # the mark pass found going on; the depth test runs before the shader.
             chosen = layer == 0 or listed
             if chosen and layer > 0:
-                self._mark(t, src, perspective)
+                self._mark(t, dst, perspective)
             if chosen:
                 ctx.enable(moderngl.DEPTH_TEST)
                 ctx.depth_func = ">"
@@ -428,7 +428,7 @@ class Marcher:
             t[f"last_{src}"].use(7)
             t["entry_fbo"].use()
             t["entry_fbo"].clear(depth=1.0)
-            self._clear_entries(t)
+            self._clear_entries(t)  # this march runs on every pixel (march.frag reads NO_ENTRY)
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.depth_func = "<"
             if self._query is None:
@@ -490,17 +490,16 @@ class Marcher:
                                    PEEL=peel, RIM=rim, LIST=int(listed), LIST_LENGTH=LIST_LENGTH)
 
     def _clear_entries(self, t: dict[str, Any]) -> None:
-        """The entry target to NO_ENTRY (march_common.glsl), -1: a clear of an integer target
-        with a float colour is undefined."""
+        """The entry target to NO_ENTRY (march_common.glsl), -1, before a peel pass (a clear
+        of an integer target with a float colour is undefined)."""
         entry = t["entry"]
         entry.write(np.full(entry.width * entry.height, -1, dtype=np.int32).tobytes())
 
-    def _mark(self, t: dict[str, Any], src: str, perspective: int) -> None:
-        """march_mark.frag: the last march pass's targets (``src``) copied to the other
-        set's, depth 0 where a ray goes on and 1 elsewhere, for the next march pass."""
+    def _mark(self, t: dict[str, Any], dst: str, perspective: int) -> None:
+        """march_mark.frag: the last march pass's targets (bound to units 5-7) copied to
+        set ``dst``'s, depth 0 where a ray goes on and 1 elsewhere, for the next march pass."""
         import moderngl
 
-        dst = "b" if src == "a" else "a"
         mark = self.owner._program("march_mark", **self._shifts, PERSPECTIVE=perspective)
         self._set(mark, dict(u_color_in=5, u_state_in=6, u_last_in=7))
         t[f"fbo_{dst}"].use()
