@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from tetvr.mesh import TetMesh
+    from tetvr.mesh.tetmesh import TetMesh
 
 #: The repository root.
 ROOT = Path(__file__).resolve().parents[1]

@@ -38,7 +38,8 @@ METHODS = ("raymarch", "projected")
 
 
 def scenes(n_cameras: int) -> list[tuple[str, object, list[object], object]]:
-    from tetvr import Camera, TetMesh, TransferFunction, synthetic
+    from tetvr import Camera, TetMesh, TransferFunction
+    from tetvr.mesh import synthetic
 
     rng = np.random.default_rng(2026)
     cube = synthetic.cube(1, rotate=False)
@@ -87,7 +88,7 @@ def main() -> None:
     args = parser.parse_args()
     from tetvr import RenderSettings
     from tetvr.gl import Renderer
-    from tetvr.reference import render_reference
+    from tetvr.reference.tets import render_reference
 
     sizes = (64, 304, 640) if args.quick else SIZES
     n_cameras = 8 if args.quick else N_CAMERAS

@@ -4,14 +4,14 @@ Four parts, each written to ``<out>/distributed.json`` (and a chart, ``distribut
 
 * **series** -- S steps of a synthetic mesh written as ``.vtu`` files, each read and
   rendered (256x256): a plain serial loop in this process against
-  :func:`tetvr.distributed.render_series` on a LocalCluster of 1 and of 2 workers,
+  :func:`tetvr.cluster.timeseries.render_series` on a LocalCluster of 1 and of 2 workers,
   alternated for R rounds (the best of each kept: on a shared machine the rounds differ);
   frames compared bit for bit. Dask's own cost per frame: a trivial frame (one tet, 8x8)
   through the same path, minus the same frame rendered here.
-* **composite** -- :func:`tetvr.bricks.composite_over` alone: ns per pixel per brick.
+* **composite** -- :func:`tetvr.cluster.bricks.composite_over` alone: ns per pixel per brick.
 * **bricks** -- a synthetic (rotated, so planes cut cells) cube of ~1M (and with
   ``--tets 1e6,1e7`` ~10M) tets split into P = 1, 2, 4, 8 k-d bricks held by a fresh
-  2-worker cluster (:func:`tetvr.distributed.distribute_mesh`): the split's time on the
+  2-worker cluster (:func:`tetvr.cluster.distributed.distribute_mesh`): the split's time on the
   client, the first frame, the median time per view change (an orbit), and each worker's
   peak resident memory (``ru_maxrss``, a fresh cluster per P).
 * **accuracy** -- the acceptance matrix: a grid cube, the interlocking rings (non-convex)
@@ -70,8 +70,10 @@ def series(args: argparse.Namespace) -> dict:
     import meshio
 
     import tetvr
-    from tetvr import Camera, TransferFunction, synthetic
-    from tetvr.distributed import cluster_client, render_series
+    from tetvr import Camera, TransferFunction
+    from tetvr.mesh import synthetic
+    from tetvr.cluster.timeseries import render_series
+    from tetvr.cluster.workers import cluster_client
     from tetvr.gl import Renderer
 
     n_cube, n_steps, size = (12, 8, (128, 128)) if args.quick else (20, 16, (256, 256))
@@ -124,7 +126,7 @@ def series(args: argparse.Namespace) -> dict:
 
 
 def composite() -> dict:
-    from tetvr.bricks import composite_over
+    from tetvr.cluster.bricks import composite_over
 
     rng = np.random.default_rng(0)
     out = {}
@@ -142,10 +144,12 @@ def _timed(fn) -> float:
 
 
 def bricks(args: argparse.Namespace, n_tets: float) -> dict:
-    from tetvr import Camera, TransferFunction, synthetic
-    from tetvr.animate import orbit
-    from tetvr.bricks import kd_bricks
-    from tetvr.distributed import cluster_client, distribute_mesh
+    from tetvr import Camera, TransferFunction
+    from tetvr.mesh import synthetic
+    from tetvr.apps.animate import orbit
+    from tetvr.cluster.bricks import kd_bricks
+    from tetvr.cluster.distributed import distribute_mesh
+    from tetvr.cluster.workers import cluster_client
 
     n = max(2, round((n_tets / 6) ** (1 / 3)))
     mesh = synthetic.cube(n)
@@ -187,12 +191,14 @@ def bricks(args: argparse.Namespace, n_tets: float) -> dict:
 
 
 def accuracy(args: argparse.Namespace) -> dict:
-    from tetvr import Camera, RenderSettings, TransferFunction, synthetic
-    from tetvr.distributed import cluster_client, distribute_mesh
-    from tetvr.bricks import kd_bricks
+    from tetvr import Camera, RenderSettings, TransferFunction
+    from tetvr.mesh import synthetic
+    from tetvr.cluster.distributed import distribute_mesh
+    from tetvr.cluster.workers import cluster_client
+    from tetvr.cluster.bricks import kd_bricks
     from tetvr.gl import Renderer
-    from tetvr.image import psnr
-    from tetvr.reference import render_reference
+    from tetvr.core.image import psnr
+    from tetvr.reference.tets import render_reference
 
     common = _common()
     meshes = {"cube (grid)": lambda: synthetic.cube(6, rotate=False), "interlocking rings": synthetic.interlocking_rings}

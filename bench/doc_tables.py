@@ -325,7 +325,7 @@ def viewer_latency() -> str:
     """The Jupyter viewer's latency in Chromium, from the input event to pixels on the page
     (bench/viewer.py)."""
     r = _load("viewer.json")
-    labels = {"after": "`tetvr.widget.Viewer` (jupyter_rfb, render loop, render process)",
+    labels = {"after": "`tetvr.apps.viewer.Viewer` (jupyter_rfb, render loop, render process)",
               "before": "ipywidgets.Image + ipyevents, rendering in the event handler"}
     rows = ["| mesh | tets | viewer | input → first pixels ms | mouse-up → full frame ms | frames shown during the drag "
             "| drag ms |", "|---|---:|---|---:|---:|---:|---:|"]
@@ -362,13 +362,13 @@ _STABILITY_COLUMNS = {"projected tetrahedra": "projected tetrahedra",
 
 
 def stability_cases() -> str:
-    """docs/limits.md: every stability case (tetvr.stability) with the default settings
+    """docs/limits.md: every stability case (tetvr.scene.stability) with the default settings
     (PSNR, largest per-pixel error, pixels beyond 1/255) and with one setting changed (PSNR),
     from bench/speed_accuracy.py."""
     import warnings
 
     sys.path.insert(0, str(ROOT))
-    from tetvr.stability import CASES, case
+    from tetvr.scene.stability import CASES, case
 
     r = _load("speed_accuracy.json")
 

@@ -29,8 +29,8 @@ sys.path.insert(0, str(ROOT))
 
 import tetvr  # noqa: E402
 from tetvr import Camera, RenderSettings  # noqa: E402
-from tetvr import synthetic  # noqa: E402
-from tetvr.examples import carotid_fusion  # noqa: E402
+from tetvr.mesh import synthetic  # noqa: E402
+from tetvr.scene.examples import carotid_fusion  # noqa: E402
 from tetvr.render import default_transfer_function  # noqa: E402
 
 SIZE = (256, 256)

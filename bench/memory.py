@@ -28,7 +28,8 @@ CHILD = r"""
 import json, resource, sys, time
 sys.path.insert(0, {root!r})
 import tetvr
-from tetvr import synthetic, Camera
+from tetvr import Camera
+from tetvr.mesh import synthetic
 from tetvr.render import default_transfer_function
 n = {n}
 t0 = time.perf_counter()
@@ -38,7 +39,7 @@ tf = default_transfer_function(mesh, opacity=0.3)
 with tetvr.Renderer() as r:
     img = r.render(mesh, Camera.fit(mesh), tf, size=(512, 512))
     gpu = r.gpu_bytes()
-    chunked = r._chunked
+    chunked = r._cells.chunked
     info = r.gl_info
 t2 = time.perf_counter()
 print(json.dumps(dict(n_tets=mesh.n_tets, n_points=mesh.n_points, peak_rss=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,

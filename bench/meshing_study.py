@@ -1,7 +1,7 @@
 """Meshing study: how many cells does a view need?
 
 One surface (a unit icosphere), one view, one smooth field with detail at a few scales.
-fTetWild (``tetvr.meshing.tetrahedralize``) meshes the sphere at target edge lengths of
+fTetWild (``tetvr.mesh.meshing.tetrahedralize``) meshes the sphere at target edge lengths of
 ``pixels_per_cell`` pixel footprints; every mesh gets the same analytic field at its points.
 For each mesh we measure
 
@@ -41,10 +41,11 @@ sys.path.insert(0, str(ROOT))
 from _common import loadavg, machine  # noqa: E402
 
 import tetvr  # noqa: E402
-from tetvr import Camera, TransferFunction, synthetic  # noqa: E402
-from tetvr.image import psnr, rmse  # noqa: E402
-from tetvr.meshing import pixel_footprint, tetrahedralize  # noqa: E402
-from tetvr.reference import render_reference  # noqa: E402
+from tetvr import Camera, TransferFunction  # noqa: E402
+from tetvr.mesh import synthetic  # noqa: E402
+from tetvr.core.image import psnr, rmse  # noqa: E402
+from tetvr.mesh.meshing import pixel_footprint, tetrahedralize  # noqa: E402
+from tetvr.reference.tets import render_reference  # noqa: E402
 
 QUANTUM_RMSE = 1.0 / 255.0 / np.sqrt(12.0)
 

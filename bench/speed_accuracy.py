@@ -10,7 +10,7 @@ every transfer-function change. A variant is on the Pareto front when no other i
 least as good in frame time and RMSE and better in one (5 % ties; errors below the
 rounding noise of a 16-bit image, ERROR_FLOOR, tie too); the front of all three costs
 (frame time, table time, RMSE) and the front without the error floor are recorded too.
-The stability cases (tetvr.stability) are measured the same way.
+The stability cases (tetvr.scene.stability) are measured the same way.
 
     python bench/speed_accuracy.py [--quick] [--size 256] [--out bench/results]
 
@@ -37,13 +37,14 @@ sys.path.insert(0, str(ROOT))
 from _common import REAL_MESHES, TETS_DATA, load_quiet, machine, timed_repeats  # noqa: E402
 
 import tetvr  # noqa: E402
-from tetvr import Camera, RenderSettings, TransferFunction, synthetic  # noqa: E402
-from tetvr.preintegrate import aligned_scalar_range, table_scalar_range  # noqa: E402
-from tetvr.reference import render_reference  # noqa: E402
+from tetvr import Camera, RenderSettings, TransferFunction  # noqa: E402
+from tetvr.mesh import synthetic  # noqa: E402
+from tetvr.optics.table import aligned_scalar_range, table_scalar_range  # noqa: E402
+from tetvr.reference.tets import render_reference  # noqa: E402
 from tetvr.settings import SORT_METHODS  # noqa: E402
-from tetvr.sort import SORTERS, auto_method  # noqa: E402
-from tetvr.stability import CASES, case  # noqa: E402
-from tetvr.tablesize import resolve as resolve_table_size  # noqa: E402
+from tetvr.order.sort import SORTERS, auto_method  # noqa: E402
+from tetvr.scene.stability import CASES, case  # noqa: E402
+from tetvr.optics.tablesize import resolve as resolve_table_size  # noqa: E402
 
 DEFAULT = RenderSettings()
 #: Small scenes are timed for more rounds (until the default's frames add up to
@@ -123,7 +124,7 @@ def scenes(quick: bool):
         op = [(0, 0.02), (q30 - 0.03, 0.05), (q30, 0.9), (q30 + 0.03, 0.05), (q60, 0.3), (1, 0.9)]
         yield name, mesh, Camera.fit(mesh, direction=(-1.0, -0.5, -0.7), zoom=1.2), _tf(mesh, op, 20, "cool-to-warm")
         # Isosurface-like: two opacity spikes 0.6 % of the range wide, nothing else (issue 22;
-        # the default warps its table's nodes to them, tetvr.tablewarp).
+        # the default warps its table's nodes to them, tetvr.optics.tablewarp).
         spikes = [(0, 0.0), (q30 - 0.003, 0.0), (q30, 0.9), (q30 + 0.003, 0.0), (q60 - 0.003, 0.0), (q60, 0.9),
                   (q60 + 0.003, 0.0), (1, 0.0)]
         yield f"{name}, spiky TF", mesh, Camera.fit(mesh, direction=(-1.0, -0.5, -0.7), zoom=1.2), \
@@ -173,7 +174,7 @@ def resolved(s: RenderSettings, mesh, tf) -> RenderSettings:
     # Aligned nodes that land where uniform ones do are the same table.
     rng = table_scalar_range(mesh.scalar_range, tf)
     align = s.table_align_nodes and aligned_scalar_range(rng, tf, size.n_bins) != rng
-    from tetvr.method import choose
+    from tetvr.order.method import choose
 
     return dataclasses.replace(s, method=choose(s, mesh), sort=auto_method(mesh) if s.sort == "auto" else s.sort,
                                table_scalar_bins=size.n_bins, table_thickness_slices=size.n_slices,
@@ -192,7 +193,7 @@ def same_as_default(vs: dict[str, RenderSettings], mesh, tf) -> dict[str, str]:
 
 
 def table_times(vs, mesh, tf) -> dict[str, float]:
-    """CPU seconds to size (an "auto" size: :mod:`tetvr.tablesize`) and build each
+    """CPU seconds to size (an "auto" size: :mod:`tetvr.optics.tablesize`) and build each
     variant's pre-integration table, both paid again on every transfer-function change;
     uncached. (The mesh's segment sample is paid once per mesh, not per transfer
     function, and is not counted.)
@@ -202,8 +203,8 @@ def table_times(vs, mesh, tf) -> dict[str, float]:
     such shape, as the fastest of 3 builds: on this shared machine the same table took
     0.70-0.94 s from one build to the next, and variants that build the same shape
     (e.g. another log base) must not differ by that noise."""
-    from tetvr.preintegrate import build_table, table_for
-    from tetvr.tablesize import cache_clear, segment_sample
+    from tetvr.optics.preintegrate import build_table, table_for
+    from tetvr.optics.tablesize import cache_clear, segment_sample
 
     segment_sample(mesh)
     sizing: dict[tuple, tuple[float, dict]] = {}
@@ -243,7 +244,7 @@ def table_times(vs, mesh, tf) -> dict[str, float]:
 def table_sweep(mesh, camera, tf, size, ref) -> list[dict[str, float]]:
     """PSNR of every table size in SWEEP_BINS x SWEEP_SLICES (the default's other settings),
     and its uncached build time: where each scene's table error comes from."""
-    from tetvr.preintegrate import build_table
+    from tetvr.optics.preintegrate import build_table
 
     out = []
     for n_bins in SWEEP_BINS:

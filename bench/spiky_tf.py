@@ -5,7 +5,7 @@ rendered with two opacity spikes to 0.9 at data quantiles, 1 % and 0.3 % of the 
 the narrower spikes reaching opacity 1 (extinction -ln(1 - a), log-singular at the peak),
 and a smooth ramp for comparison; by both GPU methods, with the table's nodes even
 (``table_warp="off"``, the former default) and as the defaults choose (``"auto"``: a warped
-table where even nodes fall short, :mod:`tetvr.tablewarp`). Recorded per row: PSNR, the
+table where even nodes fall short, :mod:`tetvr.optics.tablewarp`). Recorded per row: PSNR, the
 largest per-pixel error and the count of pixels off by more than 1/255 against the CPU
 reference, the median frame time per view change (process CPU time, llvmpipe's threads
 included, after a warm-up frame) and its ratio to the smooth transfer function's frame in
@@ -32,8 +32,8 @@ from _common import TETS_DATA, load_quiet, machine, write_json  # noqa: E402
 
 import tetvr  # noqa: E402
 from tetvr import Camera, RenderSettings, TransferFunction  # noqa: E402
-from tetvr.reference import render_reference  # noqa: E402
-from tetvr.tablesize import resolve  # noqa: E402
+from tetvr.reference.tets import render_reference  # noqa: E402
+from tetvr.optics.tablesize import resolve  # noqa: E402
 
 #: Spike half-widths, as fractions of the data range.
 WIDTHS = (0.01, 0.003)

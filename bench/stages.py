@@ -12,7 +12,7 @@ with ``shader="floor"`` (constant colour, same triangles and blending). Ratios t
 (draw / floor draw, total / floor total) are what should carry between machines;
 absolute seconds are only for this machine.
 
-Also measured: the pre-integration table build (:func:`tetvr.preintegrate.build_table`,
+Also measured: the pre-integration table build (:func:`tetvr.optics.preintegrate.build_table`,
 uncached, 16 slices, float32) for 128/256/512 bins, and the centroid sort alone for
 ~1M tets.
 
@@ -52,13 +52,13 @@ from _common import (
 )
 from tqdm import tqdm
 
-from tetvr import synthetic
-from tetvr.camera import Camera
-from tetvr.mesh import TetMesh
-from tetvr.preintegrate import build_table
+from tetvr.mesh import synthetic
+from tetvr.core.camera import Camera
+from tetvr.mesh.tetmesh import TetMesh
+from tetvr.optics.preintegrate import build_table
 from tetvr.render import default_transfer_function
 from tetvr.settings import RenderSettings
-from tetvr.sort import centroid_order
+from tetvr.order.sort import centroid_order
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = TETS_DATA

@@ -10,7 +10,7 @@ to pixels on the page:
 * **full frame**: from mouse-up to the first full-size frame after it;
 * **frames in the drag**: how many frames the page showed during the 1 s of moves.
 
-Variants: ``after`` is :class:`tetvr.widget.Viewer` (jupyter_rfb + the render loop);
+Variants: ``after`` is :class:`tetvr.apps.viewer.Viewer` (jupyter_rfb + the render loop);
 ``before`` is the viewer this one replaced (ipywidgets.Image + ipyevents, rendering in the
 event handler), loaded from git (``--before-rev``) with ipyevents installed, else left out
 with the reason in the JSON.
@@ -65,12 +65,12 @@ return true;
 
 def _cells(variant: str, mesh_path: Path) -> tuple[str, ...]:
     if variant == "after":
-        return (f"from tetvr.widget import Viewer\nviewer = Viewer({str(mesh_path)!r}, size={SIZE!r})\nviewer",)
+        return (f"from tetvr.apps.viewer import Viewer\nviewer = Viewer({str(mesh_path)!r}, size={SIZE!r})\nviewer",)
     return ("import importlib.util, sys\n"
             "spec = importlib.util.spec_from_file_location('tetvr._widget_before', '_widget_before.py')\n"
             "before = importlib.util.module_from_spec(spec); sys.modules[spec.name] = before\n"
             "spec.loader.exec_module(before)\n"
-            "from tetvr.widget import scene_of\n"
+            "from tetvr.apps.viewer.model import scene_of\n"
             f"viewer = before.Viewer(scene_of({str(mesh_path)!r}, size={SIZE!r}))\n"
             "viewer.image.add_class('tetvr-image')\n"
             "display(viewer.widget)",)
@@ -144,10 +144,10 @@ def _before_available(rev: str, root: Path) -> str | None:
     if importlib.util.find_spec("ipyevents") is None:
         return "ipyevents is not installed (pip install ipyevents): the old viewer's mouse input needs it"
     try:
-        text = subprocess.run(["git", "show", f"{rev}:tetvr/widget.py"], cwd=ROOT, capture_output=True, text=True,
+        text = subprocess.run(["git", "show", f"{rev}:tetvr/apps/viewer/model.py"], cwd=ROOT, capture_output=True, text=True,
                               check=True).stdout
     except subprocess.CalledProcessError as exc:
-        return f"git show {rev}:tetvr/widget.py failed: {exc.stderr.strip()}"
+        return f"git show {rev}:tetvr/apps/viewer/model.py failed: {exc.stderr.strip()}"
     (root / "_widget_before.py").write_text(text)
     return None
 

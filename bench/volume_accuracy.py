@@ -57,7 +57,7 @@ def scenes() -> dict[str, tuple[Any, Any, Any, tuple[str, ...]]]:
     """name -> (volume, transfer function, camera, modes); only the TransferFunction,
     Camera and read_volume of tetvr are used, so an older checkout runs them too."""
     from tetvr import TransferFunction
-    from tetvr.volume import read_volume as read
+    from tetvr.io.volume_file import read_volume as read
 
     def read_volume(path: Path) -> Any:
         try:
@@ -113,7 +113,7 @@ def variants(mode: Any, voxel: float) -> dict[str, Any]:
 
 
 def errors(img: np.ndarray, ref: np.ndarray) -> dict[str, float]:
-    from tetvr.image import psnr
+    from tetvr.core.image import psnr
 
     d = np.abs(img.astype(np.float64) - ref).max(axis=-1)
     return {"psnr": psnr(img, ref), "max_error": float(d.max()), "pixels_beyond_1_255": int((d > 1 / 255).sum()),
@@ -187,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     from tetvr import RaycastSettings
     from tetvr.gl.raycaster import Raycaster
-    from tetvr.raycast_reference import render_volume_reference
+    from tetvr.reference.volume import render_volume_reference
 
     size = (args.size, args.size)
     found = scenes()

@@ -5,9 +5,9 @@ exists, bluntfin and combustor, field "Density") this renders a 512x512 perspect
 (:meth:`Camera.fit`, :func:`default_transfer_function` with opacity 0.5) with
 
 * tetvr's GPU renderer, default settings (``Renderer``);
-* tetvr in VTK parity (:data:`tetvr.vtkcompare.PARITY_SETTINGS`: VTK's convention);
+* tetvr in VTK parity (:data:`tetvr.settings.PARITY_SETTINGS`: VTK's convention);
 * VTK's ``vtkProjectedTetrahedraMapper`` in an offscreen EGL window, in a child process
-  (:class:`tetvr.vtkcompare.VTKProcess`: VTK's EGL window and moderngl's context cannot
+  (:class:`tetvr.apps.vtkrender.VTKProcess`: VTK's EGL window and moderngl's context cannot
   share a process),
 
 all on the same OpenGL (Mesa llvmpipe here). The three renderers stay
@@ -54,13 +54,16 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import tetvr  # noqa: E402
-from tetvr import Camera, synthetic  # noqa: E402
-from tetvr.image import psnr, rmse, write_png  # noqa: E402
-from tetvr.mesh import TetMesh  # noqa: E402
-from tetvr.reference import render_reference  # noqa: E402
+from tetvr import Camera  # noqa: E402
+from tetvr.mesh import synthetic  # noqa: E402
+from tetvr.core.image import psnr, rmse, write_png  # noqa: E402
+from tetvr.mesh.tetmesh import TetMesh  # noqa: E402
+from tetvr.reference.tets import render_reference  # noqa: E402
 from tetvr.render import default_transfer_function  # noqa: E402
 from tetvr.settings import RenderSettings  # noqa: E402
-from tetvr.vtkcompare import PARITY_SETTINGS, VTKProcess, orbit, quantize8, tile_images, vtk_status  # noqa: E402
+from tetvr.apps.vtkcompare import orbit, quantize8, tile_images  # noqa: E402
+from tetvr.apps.vtkrender import VTKProcess, vtk_status  # noqa: E402
+from tetvr.settings import PARITY_SETTINGS
 
 from _common import (  # noqa: E402
     CUBE_NS, QUICK_MAX_TETS, REAL_MESHES, TETS_DATA, load_quiet, loadavg, machine, write_json,
@@ -106,7 +109,7 @@ class _Tetvr:
 
 
 class _Vtk:
-    """VTK in its own process (see tetvr.vtkcompare): the frame time is measured there,
+    """VTK in its own process (see tetvr.apps.vtkrender): the frame time is measured there,
     from the camera change to the image in numpy, without moving the image across."""
 
     def __init__(self, mesh: TetMesh, tf: Any, size: tuple[int, int]) -> None:

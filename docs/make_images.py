@@ -24,11 +24,12 @@ from pathlib import Path
 import numpy as np
 
 import tetvr
-from tetvr import Camera, RenderSettings, TransferFunction, synthetic
-from tetvr.annotate import panels as labelled
-from tetvr.image import DEFAULT_BACKGROUND, psnr
-from tetvr.reference import render_reference
-from tetvr.stability import CASES, case
+from tetvr import Camera, RenderSettings, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.apps.annotate import panels as labelled
+from tetvr.core.image import DEFAULT_BACKGROUND, psnr
+from tetvr.reference.tets import render_reference
+from tetvr.scene.stability import CASES, case
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "images" / "guide"
@@ -37,7 +38,7 @@ ROOT = HERE.parent
 
 def panels(images, titles, path, *, background=DEFAULT_BACKGROUND, suptitle=None, cols=None, size_in=2.2):
     """Images side by side (or in rows of ``cols``), each under its title, as one PNG
-    (tetvr.annotate.panels: the same labelled grid tetvr compare and fusion-demo write)."""
+    (tetvr.apps.annotate.panels: the same labelled grid tetvr compare and fusion-demo write)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(labelled(images, titles, background=background, suptitle=suptitle, cols=cols, width_in=size_in))
     print("wrote", path.relative_to(ROOT))
@@ -89,7 +90,7 @@ def stability(name):
 # ---------------------------------------------------------------- groups
 def quickstart():
     mesh, cam, _ = post_scene()
-    from tetvr.colormaps import colormap
+    from tetvr.optics.colormaps import colormap
 
     names = ["viridis", "cool-to-warm", "hot", "grayscale", "magma"]
     ramp = [(0.0, 0.0), (0.2, 0.05), (0.5, 0.3), (0.8, 0.8), (1.0, 1.0)]
@@ -113,9 +114,9 @@ DEFAULT_MESHES = [("bluntfin_tets.vtu", "Density"), ("pipe_flow_init_flow.vtu", 
 
 def defaults():
     """Real FEM/CFD results with tetvr's defaults, beside a constant opacity over the full range."""
-    from tetvr.camera import _fit
+    from tetvr.core.camera import _fit
     from tetvr.render import default_transfer_function
-    from tetvr.transfer import default_unit_distance
+    from tetvr.optics.transfer import default_unit_distance
 
     imgs, titles = [], []
     size = (320, 240)
@@ -202,7 +203,7 @@ def methods(size=(160, 160), only=None):
 
 def fusion(size=(320, 240)):
     from tetvr import FUSION_MODES, RayTextures, fuse
-    from tetvr.examples import carotid_fusion
+    from tetvr.scene.examples import carotid_fusion
 
     s = carotid_fusion()
     w, h = size
@@ -241,8 +242,8 @@ def limits(size=(96, 96)):
 
 
 def interactive():
-    from tetvr.animate import orbit
-    from tetvr.widget import TransferFunctionEditor
+    from tetvr.apps.animate import orbit
+    from tetvr.apps.viewer.model import TransferFunctionEditor
 
     mesh, cam, tf = post_scene()
     ed = TransferFunctionEditor.from_transfer_function(tf, colormap="viridis")

@@ -50,7 +50,7 @@ def renderer(request):
 
 def save_failure(name: str, got: np.ndarray, want: np.ndarray) -> Path:
     """Write got / want / magnified |difference| PNGs for a failed image comparison."""
-    from tetvr.image import write_png
+    from tetvr.core.image import write_png
 
     ARTIFACTS.mkdir(exist_ok=True)
     diff = np.abs(got.astype(np.float64) - want)

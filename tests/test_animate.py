@@ -10,10 +10,13 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, TransferFunction, synthetic
-from tetvr.animate import animate, azimuth, orbit, read_time_series, render_frames, write_frames
-from tetvr.cli import main
-from tetvr.image import psnr
+from tetvr import Camera, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.apps.animate import animate, azimuth, orbit, render_frames
+from tetvr.io.video import write_frames
+from tetvr.io.series import read_time_series
+from tetvr.apps.cli import main
+from tetvr.core.image import psnr
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -15,10 +15,11 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, synthetic
-from tetvr.annotate import Picture, annotate, as_mesh, panels, plot, show
-from tetvr.cli import EXIT_USAGE, main
-from tetvr.image import composite_over, to_rgba8
+from tetvr import Camera
+from tetvr.mesh import synthetic
+from tetvr.apps.annotate import Picture, annotate, as_mesh, panels, plot, show
+from tetvr.apps.cli import EXIT_USAGE, main
+from tetvr.core.image import composite_over, to_rgba8
 from tetvr.render import default_transfer_function
 
 from .badinput._util import POST_VTK
@@ -203,7 +204,7 @@ def test_cli_without_matplotlib_writes_the_plain_picture(tmp_path, capsys, monke
     def missing():
         raise ImportError("no matplotlib")
 
-    monkeypatch.setattr("tetvr.annotate._matplotlib", missing)
+    monkeypatch.setattr("tetvr.apps.annotate._matplotlib", missing)
     out = tmp_path / "o.png"
     assert main(["render", str(POST_VTK), "--size", "32x24", "-o", str(out), "--reference"]) == 0
     assert "no legend: matplotlib is not installed" in capsys.readouterr().err
@@ -238,14 +239,14 @@ def test_cli_version_and_info(capsys):
 
 
 def test_info_percentiles_of_a_field_that_is_mostly_one_value():
-    from tetvr.cli import _stats_line
+    from tetvr.apps.cli.commands import _stats_line
 
     line = _stats_line(np.r_[np.zeros(90), np.arange(1.0, 11.0)])  # a CT that is mostly air
     assert "1% 0, median 0, 99% 9.5" in line, line  # the median is not widened to the maximum
 
 
 def test_cli_info_on_a_volume(capsys):
-    from tetvr.examples import bundled
+    from tetvr.scene.examples import bundled
 
     assert main(["info", str(bundled("carotid.vtk"))]) == 0
     out = capsys.readouterr().out
@@ -259,7 +260,7 @@ def test_cli_info_on_a_volume(capsys):
     (-0.5, 0.5, ["-0.4", "-0.2", "0.0", "0.2", "0.4"]),
 ])
 def test_legend_tick_labels_are_in_data_units_and_evenly_spaced(lo, hi, want):
-    from tetvr.annotate import _tick_labels
+    from tetvr.apps.annotate import _tick_labels
 
     ticks, labels = _tick_labels(lo, hi)
     assert labels == want

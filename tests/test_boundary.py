@@ -1,4 +1,4 @@
-"""Rays through the boundary (tetvr.boundary) and the ``xmpvo`` sort built on them: edges
+"""Rays through the boundary (tetvr.order.boundary) and the ``xmpvo`` sort built on them: edges
 between cells that share no face, convexity detection, cycles between parts, and the
 picture of interlocking parts against the exact reference."""
 
@@ -7,13 +7,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tetvr import Camera, RenderSettings, TetMesh, TransferFunction, synthetic
-from tetvr.adjacency import face_adjacency
-from tetvr.boundary import boundary_constraints
+from tetvr import Camera, RenderSettings, TetMesh, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.mesh.adjacency import face_adjacency
+from tetvr.order.boundary import boundary_constraints
 from tetvr.gl import Renderer
-from tetvr.image import psnr
-from tetvr.reference import render_reference
-from tetvr.sort import auto_method, mpvonc_order, sort_with_stats, visibility_order, xmpvo_order
+from tetvr.core.image import psnr
+from tetvr.reference.tets import render_reference
+from tetvr.order.sort import auto_method, mpvonc_order, sort_with_stats, visibility_order, xmpvo_order
 
 
 def _shifted(mesh: TetMesh, offset) -> TetMesh:

@@ -11,11 +11,13 @@ import meshio
 import numpy as np
 import pytest
 
-from tetvr import Camera, RenderSettings, TransferFunction, synthetic
-from tetvr.image import psnr
-from tetvr.mesh import TetMesh, read
-from tetvr.reference import render_reference
-from tetvr.transfer import field_range
+from tetvr import Camera, RenderSettings, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.core.image import psnr
+from tetvr.mesh.tetmesh import TetMesh
+from tetvr.io.meshfile import read
+from tetvr.reference.tets import render_reference
+from tetvr.optics.transfer import field_range
 
 from .conftest import save_failure
 

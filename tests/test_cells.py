@@ -1,6 +1,6 @@
-"""Mixed cells split into conforming tetrahedra (tetvr.cells), and reading them (tetvr.read).
+"""Mixed cells split into conforming tetrahedra (tetvr.mesh.cells), and reading them (tetvr.read).
 
-Conformity is checked two ways that share no code with tetvr.cells: combinatorially (every
+Conformity is checked two ways that share no code with tetvr.mesh.cells: combinatorially (every
 interior triangle belongs to exactly two tets, the tet volumes add up to the box) and
 optically (the exact reference renderer, looking through a box of hexes whose interior
 quads are not planar, must give the closed-form image; a crack or an overlap changes the
@@ -17,8 +17,10 @@ import pytest
 
 import tetvr
 from tetvr import Camera, TetMesh, TransferFunction
-from tetvr.cells import _REFERENCE, VOLUME_CELLS, cell_triangulation, read_cells, read_legacy_vtk, split_cells
-from tetvr.reference import render_reference
+from tetvr.mesh.cells import _REFERENCE, VOLUME_CELLS, cell_triangulation, split_cells
+from tetvr.io.legacy_vtk import read_legacy_vtk
+from tetvr.io.meshfile import read_cells
+from tetvr.reference.tets import render_reference
 
 from .conftest import shared_file
 
@@ -31,7 +33,7 @@ def _raise_on_float_errors():
         yield
 
 
-# ---------------------------------------------------------------- helpers (independent of tetvr.cells)
+# ---------------------------------------------------------------- helpers (independent of tetvr.mesh.cells)
 
 
 def volume6(points, tets):
@@ -105,7 +107,7 @@ def test_every_table_entry_tiles_its_reference_cell_face_to_face(shape):
 
 
 def test_the_cube_has_74_triangulations_and_the_min_id_rule_never_needs_a_centroid():
-    from tetvr.cells import _face_to_face, _search_triangulations, _volume6
+    from tetvr.mesh.cells import _face_to_face, _search_triangulations, _volume6
 
     corners, quads, tris = _REFERENCE["hexahedron"]
     sols = [s for s in _search_triangulations(corners, _volume6(corners, quads, tris)) if _face_to_face(s, quads, tris)]

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tetvr.cli import main
+from tetvr.apps.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -40,7 +40,7 @@ def test_cli_errors_are_clear(tmp_path, capsys):
 
 
 def test_import_needs_no_gl():
-    code = "import sys, tetvr, tetvr.reference; assert 'moderngl' not in sys.modules, 'GL imported'"
+    code = "import sys, tetvr, tetvr.reference.tets; assert 'moderngl' not in sys.modules, 'GL imported'"
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
@@ -76,7 +76,7 @@ def test_cli_fusion_demo(tmp_path):
 
 
 def test_image_cells_to_tets_lines_up_with_the_volume():
-    from tetvr.examples import carotid_fusion
+    from tetvr.scene.examples import carotid_fusion
 
     scene = carotid_fusion()
     # Every mesh point is a voxel centre carrying that voxel's value.

@@ -1,7 +1,7 @@
 """Clip planes and boxes, and opaque surfaces inside the mesh, against the exact reference.
 
 Both GPU methods cut each ray--tet segment to the pixel's window exactly as the reference
-does (tetvr.clip.ray_window; the surface's hit from tetvr.surface.surface_hits), so the
+does (tetvr.core.clip.ray_window; the surface's hit from tetvr.core.surface.surface_hits), so the
 error is the table's interpolation (~1e-4 here) plus float32 geometry. The surfaces' hits
 are intersected per pixel on the GPU too, so coverage agrees to rounding: a silhouette
 pixel the rasteriser and the reference decided differently would show as an error near 1,
@@ -16,12 +16,13 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, Clip, RenderSettings, Surface, TransferFunction, synthetic
-from tetvr.clip import MAX_CLIP_PLANES, ray_window
-from tetvr.image import psnr
-from tetvr.reference import render_reference
+from tetvr import Camera, Clip, RenderSettings, Surface, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.core.clip import MAX_CLIP_PLANES, ray_window
+from tetvr.core.image import psnr
+from tetvr.reference.tets import render_reference
 from tetvr.render import default_transfer_function
-from tetvr.surface import surface_hits
+from tetvr.core.surface import surface_hits
 
 from .conftest import save_failure, shared_file
 
@@ -341,8 +342,8 @@ def _cube_and_ball(folder):
 def test_a_scene_with_clip_and_surfaces_round_trips_and_renders(tmp_path):
     import json
 
-    from tetvr.cli import main
-    from tetvr.scene import load_scene
+    from tetvr.apps.cli import main
+    from tetvr.scene.load import load_scene
 
     lo, hi = _cube_and_ball(tmp_path)
     c = 0.5 * (lo + hi)
@@ -366,7 +367,7 @@ def test_a_scene_with_clip_and_surfaces_round_trips_and_renders(tmp_path):
 
 
 def test_cli_clip_and_surface_options(tmp_path):
-    from tetvr.cli import main
+    from tetvr.apps.cli import main
 
     lo, hi = _cube_and_ball(tmp_path)
     c = 0.5 * (lo + hi)

@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import synthetic
-from tetvr.cli import main
-from tetvr.collections import leaf_files, pieces, read_pvd, read_step
+from tetvr.mesh import synthetic
+from tetvr.apps.cli import main
+from tetvr.io.collections import leaf_files, pieces, read_pvd
+from tetvr.io.series import read_step
 
 N_PIECES = 4
 

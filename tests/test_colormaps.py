@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tetvr import TransferFunction
-from tetvr.colormaps import (_lab_to_rgb, _rgb_to_lab, available, colormap, from_matplotlib, from_paraview,
+from tetvr.optics.colormaps import (_lab_to_rgb, _rgb_to_lab, available, colormap, from_matplotlib, from_paraview,
                              read_paraview, to_paraview, write_paraview)
 
 # As ParaView 5.x writes "Save preset" for Cool to Warm with its opacity (the bundled

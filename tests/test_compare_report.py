@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import vtkcompare
+from tetvr.apps import vtkcompare
 
 
 def test_compare_says_vtk_is_missing_before_rendering_anything(monkeypatch):
@@ -16,7 +16,7 @@ def test_compare_says_vtk_is_missing_before_rendering_anything(monkeypatch):
     def no_render(*args, **kwargs):
         raise AssertionError("rendered before checking for VTK")
 
-    monkeypatch.setattr("tetvr.reference.render_reference", no_render)
+    monkeypatch.setattr("tetvr.reference.tets.render_reference", no_render)
     with pytest.raises(vtkcompare.VTKUnavailableError, match="not installed"):
         vtkcompare.compare(scene, mappers=("pt",))
 

@@ -1,4 +1,4 @@
-"""Culling (tetvr.cull): what it drops adds nothing to the image.
+"""Culling (tetvr.order.cull): what it drops adds nothing to the image.
 
 The GPU comparison is bit for bit: a culled cell either rasterises no fragment (outside
 the frustum) or looks up table entries that are exactly zero (transparent, with the
@@ -12,8 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tetvr import Camera, TransferFunction, synthetic
-from tetvr.cull import (
+from tetvr import Camera, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.order.cull import (
     CullStats,
     gpu_scalar_margin,
     outside_view,
@@ -22,7 +23,8 @@ from tetvr.cull import (
     visible_cells,
     zero_opacity,
 )
-from tetvr.reference import ray_segments, render_reference
+from tetvr.reference.tets import render_reference
+from tetvr.reference.segments import ray_segments
 
 SIZE = (64, 48)
 
@@ -133,7 +135,8 @@ def test_options_and_validation():
 def test_renderer_cull_setting_keeps_the_image():
     """RenderSettings(cull=True): fewer cells drawn, the same image bit for bit."""
     import tetvr
-    from tetvr import Camera, RenderSettings, TransferFunction, synthetic
+    from tetvr import Camera, RenderSettings, TransferFunction
+    from tetvr.mesh import synthetic
 
     mesh = synthetic.cube(6)
     tf = TransferFunction.preset("viridis", mesh.scalar_range, opacity=[(0, 0), (0.45, 0), (0.7, 0.8), (1, 0.9)],

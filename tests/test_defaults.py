@@ -1,4 +1,4 @@
-"""The defaults that show the data: one rule (tetvr.transfer) for the range, the opacity
+"""The defaults that show the data: one rule (tetvr.optics.transfer) for the range, the opacity
 ramp and the unit distance, and Camera.fit framing the projected extent; each tested on
 meshes of 1e-3 and 1e3 extent, where the picture must come out the same.
 
@@ -15,10 +15,11 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, TransferFunction, synthetic
-from tetvr.camera import _fit
+from tetvr import Camera, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.core.camera import _fit
 from tetvr.render import default_transfer_function
-from tetvr.transfer import DEFAULT_UNIT_FRACTION, default_unit_distance, point_weights, robust_range
+from tetvr.optics.transfer import DEFAULT_UNIT_FRACTION, default_unit_distance, point_weights, robust_range
 
 SCALES = [1e-3, 1e3]
 
@@ -172,7 +173,7 @@ def test_fit_frames_the_projected_extent(scale, parallel):
 
 def _sphere_camera(mesh: tetvr.TetMesh) -> Camera:
     """The former Camera.fit: the bounding sphere touches the view's short side."""
-    from tetvr.camera import bounding_sphere
+    from tetvr.core.camera import bounding_sphere
 
     centre, radius = bounding_sphere(mesh.bounds)
     d = np.array([-1.0, -0.6, -1.2]) / np.linalg.norm([-1.0, -0.6, -1.2])
@@ -223,7 +224,7 @@ def test_fit_keeps_its_keywords_and_checks_them():
 def test_scene_json_takes_the_rule(tmp_path):
     import json
 
-    from tetvr.scene import Scene
+    from tetvr.scene.scene import Scene
 
     mesh_path = tmp_path / "pipe.vtu"
     m = pipe(1e-3)

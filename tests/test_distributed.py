@@ -15,10 +15,13 @@ import pytest
 pytest.importorskip("distributed", reason='needs dask.distributed: pip install "tetvr[dask]"')
 
 import tetvr  # noqa: E402
-from tetvr import Camera, RenderSettings, TransferFunction, synthetic  # noqa: E402
-from tetvr.collections import read_pvd, read_step  # noqa: E402
-from tetvr.distributed import (  # noqa: E402
-    cluster_client, composite_over, kd_bricks, render_bricks, render_series, visibility_order)
+from tetvr import Camera, RenderSettings, TransferFunction  # noqa: E402
+from tetvr.mesh import synthetic  # noqa: E402
+from tetvr.io.collections import read_pvd  # noqa: E402
+from tetvr.io.series import read_step
+from tetvr.cluster.distributed import composite_over, kd_bricks, render_bricks, visibility_order  # noqa: E402
+from tetvr.cluster.timeseries import render_series  # noqa: E402
+from tetvr.cluster.workers import cluster_client  # noqa: E402
 
 pytestmark = pytest.mark.gl
 SIZE = (64, 48)
@@ -79,8 +82,8 @@ def _meshes():
 def scenes(local):
     """Per mesh and view: the mesh, camera, transfer function, the single-process image (the
     default method) and its PSNR against the CPU reference."""
-    from tetvr.image import psnr
-    from tetvr.reference import render_reference
+    from tetvr.core.image import psnr
+    from tetvr.reference.tets import render_reference
 
     made = {}
 
@@ -122,8 +125,8 @@ def test_bricks_composite_to_the_single_process_image(client, scenes, name, n_br
     2 pixels more, where the single image misses a ray's 9e-4-long graze of a boundary
     tet's corner (2.4e-4 off the reference; the bricks' cut faces catch it). No pixel is
     beyond 1/255, and the composite is as close to the reference (measured: closer)."""
-    from tetvr.distributed import distribute_mesh
-    from tetvr.image import psnr
+    from tetvr.cluster.distributed import distribute_mesh
+    from tetvr.core.image import psnr
 
     mesh, views = scenes(name)
     if name == "bluntfin":  # 187k tets: the view from inside here, all three in the bench
@@ -161,9 +164,9 @@ def test_exact_integration_bricks_composite_to_the_single_image(client, n_bricks
     images' rasterised entries misses the sliver the other catches (each image within
     2.5e-4 of the reference there, the single image the further at all but one). Both are
     130-140 dB from the reference, where PSNR differences are float32 noise."""
-    from tetvr.distributed import distribute_mesh
-    from tetvr.image import psnr
-    from tetvr.reference import render_reference
+    from tetvr.cluster.distributed import distribute_mesh
+    from tetvr.core.image import psnr
+    from tetvr.reference.tets import render_reference
 
     settings = RenderSettings(integration="exact")
     mesh = synthetic.interlocking_rings()
@@ -210,7 +213,7 @@ def test_projected_cut_bricks_differ_on_isolated_pixels(client, local, scenes):
     composite is not); elsewhere within the table's error, as with tet marching (at 64x64
     in perspective the bench finds the opposite: one pixel of the composite 3.2e-2 off). Not the sort: alpha, which no order changes,
     is what is off. "auto" takes tet marching for bricks (test_auto_takes_tet_marching_for_bricks)."""
-    from tetvr.distributed import distribute_mesh
+    from tetvr.cluster.distributed import distribute_mesh
 
     mesh, views = scenes("rings")
     for n_bricks in (2, 4, 8):
@@ -229,8 +232,8 @@ def test_projected_cut_bricks_differ_on_isolated_pixels(client, local, scenes):
 def test_auto_takes_tet_marching_for_bricks(client):
     """"auto" resolves once for all bricks: tet marching (a few large tets seen from
     outside included); projected tetrahedra for settings only they implement."""
-    from tetvr.distributed import distribute_mesh
-    from tetvr.method import choose
+    from tetvr.cluster.distributed import distribute_mesh
+    from tetvr.order.method import choose
 
     mesh = synthetic.cube(2, rotate=False)
     camera = Camera.fit(mesh)
@@ -285,7 +288,7 @@ def test_cut_bricks_tile_the_mesh_exactly(name, view):
     cells a plane crosses are cut there. The exact CPU renderer's composite of the bricks
     equals its whole image to float32 rounding: the cut pieces tile the mesh, carry the
     field, and the order is right."""
-    from tetvr.reference import render_reference
+    from tetvr.reference.tets import render_reference
 
     mesh = synthetic.cube(4) if name == "rotated cube" else synthetic.interlocking_rings()
     camera, tf = _scene(mesh, view)
@@ -306,7 +309,7 @@ def test_cell_data_bricks_composite_to_the_whole(local, rotate):
     the grid (nothing cut; measured 3.5e-6..1.2e-5 with tet marching, above point data's
     3e-7, not explained yet; projected tetrahedra 1.8e-7) and within the table's error
     where cells are cut."""
-    from tetvr.reference import render_reference
+    from tetvr.reference.tets import render_reference
 
     rng = np.random.default_rng(0)
     mesh = synthetic.cube(6, rotate=rotate)
@@ -378,8 +381,8 @@ def test_pvtu_pieces_redistributed_render_as_the_merged_mesh(client, local, scen
     where the single image is 2.2e-4 and 4.1e-4 off the reference and the composite
     1.1e-4 and 5.5e-5; no pixel beyond 1/255, and as close to the reference (measured
     1.5..2.3 dB closer)."""
-    from tetvr.distributed import distribute_pieces
-    from tetvr.image import psnr
+    from tetvr.cluster.distributed import distribute_pieces
+    from tetvr.core.image import psnr
 
     mesh, views = scenes(name)
     path = _write_pvtu(tmp_path, mesh, 4)
@@ -415,7 +418,7 @@ def test_pvtu_pieces_with_cell_data_render_as_the_merged_mesh(client, local, sce
     on the table's diagonal, where colour is exact and alpha is exact in the thickness,
     so two lookups for a cut segment give what one gives (point data differs there by the
     table's error, test_bricks_composite_to_the_single_process_image)."""
-    from tetvr.distributed import distribute_pieces
+    from tetvr.cluster.distributed import distribute_pieces
 
     base, views = scenes(name)
     rng = np.random.default_rng(1)
@@ -438,7 +441,7 @@ def test_pvtu_pieces_with_cell_data_render_as_the_merged_mesh(client, local, sce
 
 
 def test_a_bad_piece_fails_the_frame_naming_it(client, tmp_path):
-    from tetvr.distributed import render_pieces
+    from tetvr.cluster.distributed import render_pieces
 
     mesh = synthetic.cube(4, rotate=False)
     path = _write_pvtu(tmp_path, mesh, 4, bad=2)
@@ -450,7 +453,7 @@ def test_a_bad_piece_fails_the_frame_naming_it(client, tmp_path):
 def test_a_brick_that_cannot_render_names_its_pieces(client, tmp_path):
     """A brick whose render fails (here: a transfer function the renderer refuses) fails
     the frame with the brick and the pieces it holds in the message."""
-    from tetvr.distributed import distribute_pieces
+    from tetvr.cluster.distributed import distribute_pieces
 
     mesh = synthetic.cube(4, rotate=False)
     path = _write_pvtu(tmp_path, mesh, 2)
@@ -485,7 +488,7 @@ def test_series_frames_equal_serial_renders_bit_for_bit(client, local, tmp_path)
     lo = min(read_step(coll, k).scalar_range[0] for k in range(4))
     hi = max(read_step(coll, k).scalar_range[1] for k in range(4))
     meshes = [read_step(coll, k) for k in range(4)]
-    from tetvr.distributed import _Bounds
+    from tetvr.cluster.timeseries import _Bounds
     from tetvr.render import _tf_range
 
     bounds = np.stack([np.min([m.bounds[0] for m in meshes], axis=0), np.max([m.bounds[1] for m in meshes], axis=0)])
@@ -550,7 +553,7 @@ def test_a_killed_worker_loses_no_frame(client, tmp_path):
 
 
 def test_series_glob_in_natural_order(tmp_path):
-    from tetvr.distributed import series_sources
+    from tetvr.cluster.timeseries import series_sources
 
     for k in (10, 2, 1):
         (tmp_path / f"s{k}.vtu").write_text("")
@@ -567,7 +570,7 @@ def test_cli_animate_on_the_cluster_writes_the_serial_frames(client, tmp_path, k
     TETVR_SCHEDULER names the cluster."""
     import json
 
-    from tetvr.cli import main
+    from tetvr.apps.cli import main
 
     if kind == "xdmf":
         mesh = synthetic.cube(4)
@@ -602,7 +605,7 @@ def test_bricks_survive_a_killed_worker(client, local):
     remakes its bricks from their tasks and the next view is the same image."""
     import signal
 
-    from tetvr.distributed import distribute_mesh
+    from tetvr.cluster.distributed import distribute_mesh
 
     client.wait_for_workers(2, timeout=60)
     mesh = synthetic.cube(6, rotate=False)

@@ -2,7 +2,7 @@
 
 Each segment is cut at the transfer function's control points and integrated in closed
 form and by 3-point Gauss-Legendre quadrature (shaders/raycast_exact.glsl), the
-reference's model (tetvr.optics.integrate_pieces) in float32: what is left is float32
+reference's model (tetvr.optics.model.integrate_pieces) in float32: what is left is float32
 geometry and arithmetic, measured 2e-6..2.3e-5 per pixel here (PSNR 130-142 dB), against
 the table's 3e-5..1.6e-3 on the same scenes. So a spiky transfer function is as exact as
 a smooth one, and a segment cut in two by a brick plane integrates to what the whole
@@ -17,11 +17,12 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, Clip, RenderSettings, TransferFunction, synthetic
-from tetvr.bricks import composite_over, kd_bricks
-from tetvr.image import psnr
-from tetvr.method import choose
-from tetvr.reference import render_reference
+from tetvr import Camera, Clip, RenderSettings, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.cluster.bricks import composite_over, kd_bricks
+from tetvr.core.image import psnr
+from tetvr.order.method import choose
+from tetvr.reference.tets import render_reference
 
 from .conftest import save_failure
 

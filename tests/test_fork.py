@@ -19,7 +19,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tetvr import Camera, RenderSettings, synthetic
+from tetvr import Camera, RenderSettings
+from tetvr.mesh import synthetic
 from tetvr.gl import Renderer
 from tetvr.render import default_transfer_function
 

@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, TetMesh, TransferFunction, synthetic
+from tetvr import Camera, TetMesh, TransferFunction
+from tetvr.mesh import synthetic
 from tetvr.fuse import FUSION_MODES, RayTextures, compose, fuse, fuse_reference, over
-from tetvr.image import psnr
-from tetvr.volume import Volume
+from tetvr.core.image import psnr
+from tetvr.volume.volume import Volume
 
 from .conftest import save_failure
 

@@ -7,7 +7,8 @@ import itertools
 import numpy as np
 import pytest
 
-from tetvr import Camera, RenderSettings, synthetic
+from tetvr import Camera, RenderSettings
+from tetvr.mesh import synthetic
 from tetvr.gl import Renderer
 from tetvr.gl.raymarch import _Layout
 from tetvr.render import default_transfer_function
@@ -157,7 +158,7 @@ def test_viewer_blit_shaders_compile():
 def test_table_follows_the_transfer_function_asked_for():
     # Regression: table() used to remember the key of its last call but return the table of
     # the last frame, so asking twice for tfB after a frame with tfA gave tfA's table.
-    from tetvr.preintegrate import table_for
+    from tetvr.optics.preintegrate import table_for
 
     mesh = synthetic.cube(2)
     s = RenderSettings(table_scalar_bins=32, table_thickness_slices=4)

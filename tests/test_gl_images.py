@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, TransferFunction, synthetic
-from tetvr.image import psnr
-from tetvr.reference import render_reference
+from tetvr import Camera, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.core.image import psnr
+from tetvr.reference.tets import render_reference
 
 from .conftest import save_failure, shared_file
 
@@ -195,7 +196,7 @@ def test_far_plane_cuts_the_mesh(renderer, parallel):
 
 @pytest.mark.parametrize("parallel", [False, True])
 def test_depth_extent_matches_reference_segments(renderer, parallel):
-    from tetvr.reference import ray_segments
+    from tetvr.reference.segments import ray_segments
 
     mesh = synthetic.cube(3)
     cam = Camera.fit(mesh, direction=(-0.4, -0.3, -1.0), parallel=parallel, zoom=1.3)
@@ -229,7 +230,7 @@ def test_chunked_drawing_is_identical():
         b = chunked.render(mesh, cam, tf, size=(64, 64))
         fa, ba = whole.depth_extent(mesh, cam, size=(64, 64))
         fb, bb = chunked.depth_extent(mesh, cam, size=(64, 64))
-    assert chunked._chunked and not whole._chunked
+    assert chunked._cells.chunked and not whole._cells.chunked
     assert np.array_equal(a, b)
     assert np.array_equal(fa, fb) and np.array_equal(ba, bb)
 
@@ -237,7 +238,7 @@ def test_chunked_drawing_is_identical():
 def test_draw_batches_and_index_buffer_growth_are_identical(monkeypatch):
     """The indexed fans are drawn in batches (u_first offsets the order); many small batches,
     and an index buffer first sized for a smaller mesh and then grown, give the same image."""
-    import tetvr.gl.renderer as gl_renderer
+    import tetvr.gl.projected as gl_projected
 
     mesh = synthetic.cube(4)  # 384 tets
     small = synthetic.cube(1)  # 6 tets
@@ -247,13 +248,13 @@ def test_draw_batches_and_index_buffer_growth_are_identical(monkeypatch):
     with tetvr.Renderer(pt) as r:
         want = r.render(mesh, cam, tf, size=(64, 64))
         want_front, want_back = r.depth_extent(mesh, cam, size=(64, 64))
-    monkeypatch.setattr(gl_renderer, "_DRAW_BATCH", 37)  # 11 draw calls, the last one partial
+    monkeypatch.setattr(gl_projected, "_DRAW_BATCH", 37)  # 11 draw calls, the last one partial
     with tetvr.Renderer(pt) as r:
         r.render(small, Camera.fit(small), _tf(small), size=(16, 16))
-        assert r._fan_indices.size == small.n_tets * 12 * 4  # sized for the small mesh first
+        assert r._cells.fan_indices.size == small.n_tets * 12 * 4  # sized for the small mesh first
         got = r.render(mesh, cam, tf, size=(64, 64))
         front, back = r.depth_extent(mesh, cam, size=(64, 64))
-        assert r._fan_indices.size == 37 * 12 * 4
+        assert r._cells.fan_indices.size == 37 * 12 * 4
     assert np.array_equal(got, want)
     assert np.array_equal(front, want_front) and np.array_equal(back, want_back)
 

@@ -14,8 +14,8 @@ import pytest
 
 import tetvr
 from tetvr import Camera, TransferFunction
-from tetvr.image import psnr
-from tetvr.reference import render_reference
+from tetvr.core.image import psnr
+from tetvr.reference.tets import render_reference
 
 from .conftest import save_failure, shared_file
 

@@ -17,8 +17,9 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, TransferFunction, synthetic
-from tetvr.reference import render_reference
+from tetvr import Camera, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.reference.tets import render_reference
 
 pytestmark = pytest.mark.gl
 
@@ -42,7 +43,7 @@ def _inside() -> Camera:
 def _fan_vertices(r: tetvr.Renderer, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(ndc (n, 5, 2), exact tet (n, 5), segment (n, 5, 4)) of the last chunk's fans."""
     with r.ctx:
-        raw = r._fans.read(size=n * 5 * 32)
+        raw = r._cells.fans.read(size=n * 5 * 32)
     words = np.frombuffer(raw, dtype=np.float32).reshape(n, 5, 8)
     exact = np.frombuffer(raw, dtype=np.int32).reshape(n, 5, 8)[..., 2]
     return words[..., :2], exact, words[..., 4:]
@@ -123,17 +124,17 @@ def test_classify_ranges_draw_batches_and_chunks_give_the_same_bits(monkeypatch,
     """classify.comp writes its vertices through storage-buffer ranges (a chunk's fans may
     exceed one binding), the draw points its attributes at each batch's first tet, chunks
     upload their cells in drawing order: none of it may change a bit."""
-    import tetvr.gl.renderer as gl_renderer
+    import tetvr.gl.projected as gl_projected
 
     mesh = synthetic.cube(4)  # 384 tets
     tf = _tf(mesh)
     with tetvr.Renderer(PT) as r:
         want = r.render(mesh, cam, tf, size=(64, 64))
         want_extent = r.depth_extent(mesh, cam, size=(64, 64))
-    monkeypatch.setattr(gl_renderer, "_DRAW_BATCH", 37)
+    monkeypatch.setattr(gl_projected, "_DRAW_BATCH", 37)
     for chunk in (None, 50):
         with tetvr.Renderer(PT, chunk_tets=chunk) as r:
-            r._max_ssbo = 2 * 64 * 5 * 32  # 128 tets' fans per binding: 3 classify ranges per 384 tets
+            r._cells.max_ssbo = 2 * 64 * 5 * 32  # 128 tets' fans per binding: 3 classify ranges per 384 tets
             got = r.render(mesh, cam, tf, size=(64, 64))
             extent = r.depth_extent(mesh, cam, size=(64, 64))
             with r.ctx:

@@ -1,4 +1,4 @@
-"""Surfaces to tet meshes sized for the view (tetvr.meshing), and fields carried onto them.
+"""Surfaces to tet meshes sized for the view (tetvr.mesh.meshing), and fields carried onto them.
 
 The meshing tests need the optional ``mesh`` extra (pytetwild, trimesh) and skip with the
 reason when it is missing; the interpolation tests need neither.
@@ -14,14 +14,16 @@ import sys
 import numpy as np
 import pytest
 
-from tetvr import Camera, TetMesh, Volume, meshing, synthetic
-from tetvr.meshing import interpolate, locate, pixel_footprint, tetrahedralize
+from tetvr import Camera, TetMesh, Volume
+from tetvr.mesh import meshing
+from tetvr.mesh import synthetic
+from tetvr.mesh.meshing import interpolate, locate, pixel_footprint, tetrahedralize
 
 
 def _need_meshing():
     trimesh = pytest.importorskip("trimesh", reason="trimesh is not installed (pip install tetvr[mesh])")
     # Skip only when pytetwild is absent (not importorskip: pytetwild's own __init__ needs
-    # pyvista, which tetvr.meshing works around); an installed but broken one must fail.
+    # pyvista, which tetvr.mesh.meshing works around); an installed but broken one must fail.
     if importlib.util.find_spec("pytetwild") is None:
         pytest.skip("pytetwild is not installed (pip install tetvr[mesh])")
     return trimesh

@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, TransferFunction, synthetic
-from tetvr.reference import render_reference
+from tetvr import Camera, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.reference.tets import render_reference
 
 pytestmark = pytest.mark.gl
 

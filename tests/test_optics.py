@@ -1,4 +1,4 @@
-"""The optical model (tetvr.optics) against brute-force quadrature and closed forms."""
+"""The optical model (tetvr.optics.model) against brute-force quadrature and closed forms."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from decimal import Decimal, localcontext
 import numpy as np
 import pytest
 
-from tetvr.optics import MAX_OPACITY, extinction, integrate_pieces, mean_neg_log, piece_optical_depth
+from tetvr.optics.model import MAX_OPACITY, extinction, integrate_pieces, mean_neg_log, piece_optical_depth
 
 
 @pytest.fixture(autouse=True)

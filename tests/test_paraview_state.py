@@ -1,4 +1,4 @@
-"""ParaView state files (.pvsm) in: tetvr.paraview, load_scene and the CLI.
+"""ParaView state files (.pvsm) in: tetvr.scene.paraview, load_scene and the CLI.
 
 ``tests/data/post_volume.pvsm`` is a hand-written state in ParaView 5.11's layout (its
 proxies and property names follow states ParaView writes: ``Clients/ParaView/Testing``
@@ -30,12 +30,15 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, TransferFunction, synthetic
-from tetvr.camera import check_clipping_range, depth_extent, reset_clipping_range
-from tetvr.image import psnr
-from tetvr.paraview import load_state, paraview_unit_distance, read_state, state_transfer_function
-from tetvr.reference import render_reference
-from tetvr.scene import Scene, load_scene
+from tetvr import Camera, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.core.camera import check_clipping_range, depth_extent, reset_clipping_range
+from tetvr.core.image import psnr
+from tetvr.scene.paraview import load_state, read_state, state_transfer_function
+from tetvr.optics.transfer import paraview_unit_distance
+from tetvr.reference.tets import render_reference
+from tetvr.scene.scene import Scene
+from tetvr.scene.load import load_scene
 
 from .conftest import save_failure
 
@@ -311,7 +314,7 @@ def test_paraview_unit_distance_in_parity_scenes():
 def test_compare_uses_paraviews_unit_distance_for_a_defaulted_scene(tmp_path):
     import meshio
 
-    from tetvr.vtkcompare import compare
+    from tetvr.apps.vtkcompare import compare
 
     mesh = synthetic.cube(2)
     meshio.write(tmp_path / "cube.vtu", meshio.Mesh(mesh.points, [("tetra", mesh.tets)],
@@ -337,7 +340,7 @@ def test_state_renders_against_the_reference(parity):
     formula as VTK does: the discretized colour map classified at the vertices blurs its
     bands across cells, plus 8-bit truncation. Measured 49.7 dB, max 17.2/255, 2,029 pixels
     beyond 1/255; bar 45 dB, max 24/255, at most 3,000 pixels beyond 1/255."""
-    from tetvr.vtkcompare import quantize8
+    from tetvr.apps.vtkcompare import quantize8
 
     scene = load_state(STATE, data_directory=MESHES, size=(120, 90), parity=parity)
     got = tetvr.render(scene.mesh, camera=scene.camera, tf=scene.tf, size=scene.size, settings=scene.settings)
@@ -357,7 +360,7 @@ def test_state_renders_against_the_reference(parity):
 
 @pytest.mark.gl
 def test_cli_renders_a_state(tmp_path):
-    from tetvr.cli import main
+    from tetvr.apps.cli import main
 
     path = _state_copy(tmp_path)
     out = tmp_path / "out.png"
@@ -373,7 +376,8 @@ def test_parity_against_vtks_projected_tetra():
     ParaView's "Projected tetra" runs) with the state's camera and maps, against tetvr's
     parity picture, in the state's perspective view and in a parallel one. Measured 80.1
     and 80.3 dB, max 1/255 (on ~55 pixels); bar 55 dB and no pixel beyond 1/255."""
-    from tetvr.vtkcompare import VTKProcess, quantize8, vtk_status
+    from tetvr.apps.vtkcompare import quantize8
+    from tetvr.apps.vtkrender import VTKProcess, vtk_status
 
     ok, why = vtk_status()
     if not ok:

@@ -14,12 +14,14 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, RenderSettings, TransferFunction, synthetic
-from tetvr.image import psnr
-from tetvr.optics import OPTICS, integrate_linear_pieces, vtk_segments
-from tetvr.preintegrate import build_table
-from tetvr.reference import integrate_segments, render_reference
-from tetvr.vtkcompare import PARITY_SETTINGS
+from tetvr import Camera, RenderSettings, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.core.image import psnr
+from tetvr.optics.model import OPTICS, integrate_linear_pieces, vtk_segments
+from tetvr.optics.preintegrate import build_table
+from tetvr.reference.tets import render_reference
+from tetvr.reference.integrate import integrate_segments
+from tetvr.settings import PARITY_SETTINGS
 
 from .conftest import save_failure
 

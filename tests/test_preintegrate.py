@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tetvr import TransferFunction, optics
-from tetvr.preintegrate import build_table, table_for
+from tetvr import TransferFunction
+from tetvr.optics import model as optics
+from tetvr.optics.preintegrate import build_table, table_for
 
 TF = TransferFunction(
     color=((0.0, 1.0, 0.0, 0.0), (0.3, 0.0, 1.0, 0.0), (0.7, 0.0, 0.0, 1.0), (1.0, 1.0, 1.0, 1.0)),

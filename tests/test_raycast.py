@@ -25,9 +25,9 @@ import pytest
 
 from tetvr import Camera, TransferFunction
 from tetvr.gl.raycaster import MODES, Raycaster
-from tetvr.image import psnr
-from tetvr.optics import mean_neg_log
-from tetvr.raycast_reference import (
+from tetvr.core.image import psnr
+from tetvr.optics.model import mean_neg_log
+from tetvr.reference.volume import (
     INTERPOLATIONS,
     RAYCAST_MODES,
     RaycastSettings,
@@ -35,7 +35,8 @@ from tetvr.raycast_reference import (
     render_volume_reference,
     volume_ray_intervals,
 )
-from tetvr.volume import Volume, read_volume
+from tetvr.volume.volume import Volume
+from tetvr.io.volume_file import read_volume
 
 from .conftest import gl_object, save_failure, shared_file
 
@@ -496,7 +497,7 @@ def test_exact_integration_of_a_constant_slab(raycaster):
 
 
 def test_a_table_beyond_the_gl_is_refused_before_it_is_built(raycaster, monkeypatch):
-    import tetvr.preintegrate as pre
+    import tetvr.optics.preintegrate as pre
 
     gl_max = int(raycaster.ctx.info.get("GL_MAX_3D_TEXTURE_SIZE", 2048))
     if 2 * gl_max > 4096:
@@ -510,11 +511,11 @@ def test_a_table_beyond_the_gl_is_refused_before_it_is_built(raycaster, monkeypa
 
 
 def test_a_table_beyond_memory_is_refused_before_it_is_built(raycaster, monkeypatch):
-    import tetvr.image
-    import tetvr.preintegrate as pre
+    import tetvr.core.image
+    import tetvr.optics.preintegrate as pre
 
     monkeypatch.setattr(pre, "build_table", lambda *a, **k: pytest.fail("the table was built before it was refused"))
-    monkeypatch.setattr(tetvr.image, "available_memory", lambda: 64 << 20)
+    monkeypatch.setattr(tetvr.core.image, "available_memory", lambda: 64 << 20)
     vol, tf = sphere(8), _shell_tf(sphere(8))
     s = RaycastSettings(table_scalar_bins=1024, table_thickness_slices=8, integration="table")
     with pytest.raises(MemoryError, match=r"table_scalar_bins=1024 with table_thickness_slices=8 .* GiB of memory"):
@@ -664,8 +665,8 @@ def test_opacity_grows_with_density(raycaster):
 def test_volume_and_tet_mesh_of_one_linear_field_agree(raycaster):
     """A linear field is exact both on tets and (trilinearly) on a grid, so the two
     pipelines must produce the same image: one camera, one optical model."""
-    from tetvr import synthetic
-    from tetvr.reference import render_reference
+    from tetvr.mesh import synthetic
+    from tetvr.reference.tets import render_reference
 
     field = synthetic.linear_field((0.6, 0.3, -0.4), 0.5)
     mesh = synthetic.cube(2, field, size=1.0, rotate=False)

@@ -16,10 +16,11 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, RenderSettings, TransferFunction, synthetic
-from tetvr.image import psnr
-from tetvr.method import choose
-from tetvr.reference import render_reference
+from tetvr import Camera, RenderSettings, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.core.image import psnr
+from tetvr.order.method import choose
+from tetvr.reference.tets import render_reference
 
 from .conftest import save_failure
 from .test_near_plane_fuzz import _random_cameras
@@ -220,7 +221,7 @@ def test_method_setting():
 def test_ray_limits_and_segment_counts_of_a_non_convex_mesh(marcher):
     """The ray caster's entry/exit depths (the ray limits fusion gives the volume ray caster)
     and its segment count per pixel equal the reference's, on a torus whose rays enter twice."""
-    from tetvr.reference import ray_segments
+    from tetvr.reference.segments import ray_segments
 
     mesh = synthetic.torus(n_around=16)
     # y up, the view these bars were measured in (a pixel grazing the silhouette sets the max)
@@ -251,7 +252,7 @@ def test_segment_estimate_of_the_auto_choice(marcher, parallel):
     (what projected tetrahedra pay for); the estimate from a sample of tets matches the
     segments the ray caster walks (exactly in parallel projection, to a few per cent in
     perspective, where each tet is scaled at its centroid)."""
-    from tetvr.method import CROSSOVER_SEGMENTS_PER_TET, segments_per_tet
+    from tetvr.order.method import CROSSOVER_SEGMENTS_PER_TET, segments_per_tet
 
     mesh = synthetic.cube(3)
     cam = Camera.fit(mesh, direction=(-0.3, -0.2, -1.0), parallel=parallel)
@@ -261,7 +262,7 @@ def test_segment_estimate_of_the_auto_choice(marcher, parallel):
         assert abs(estimate / walked - 1.0) < (0.01 if parallel else 0.1), (size, estimate, walked)
     # Few large tets on screen (thousands of segments each) or small: tet marching, whose
     # segment costs less than a fragment of projected tetrahedra on llvmpipe.
-    from tetvr.method import MARCH_NS_PER_SEGMENT, PROJECTED_NS_PER_FRAGMENT
+    from tetvr.order.method import MARCH_NS_PER_SEGMENT, PROJECTED_NS_PER_FRAGMENT
 
     assert segments_per_tet(mesh, cam, (1024, 1024)) > 1000.0
     assert MARCH_NS_PER_SEGMENT < PROJECTED_NS_PER_FRAGMENT and CROSSOVER_SEGMENTS_PER_TET == float("inf")

@@ -1,4 +1,4 @@
-"""The CPU reference renderer (tetvr.reference) on scenes with known answers.
+"""The CPU reference renderer (tetvr.reference.tets) on scenes with known answers.
 
 Every expected value here is computed another way than the renderer computes it:
 chords by closed form, by barycentric coordinates from a matrix inverse, or by the
@@ -15,8 +15,10 @@ import numpy as np
 import pytest
 
 from tetvr import Camera, TetMesh, TransferFunction
-from tetvr.optics import MAX_OPACITY, integrate_pieces
-from tetvr.reference import composite, integrate_segments, ray_lengths, ray_segments, render_reference
+from tetvr.optics.model import MAX_OPACITY, integrate_pieces
+from tetvr.reference.tets import render_reference
+from tetvr.reference.integrate import composite, integrate_segments
+from tetvr.reference.segments import ray_lengths, ray_segments
 
 ATOL = 1e-6
 

@@ -10,7 +10,7 @@ import pytest
 from tetvr import Camera, TransferFunction
 from tetvr.gl import Raycaster, Renderer
 from tetvr.gl.context import create_context
-from tetvr.volume import Volume
+from tetvr.volume.volume import Volume
 
 pytestmark = pytest.mark.gl
 

@@ -5,7 +5,7 @@ Entering only where the rasteriser covered a boundary face, tet marching lost a 
 to 1e-3 px inside the mesh in the first five (nothing for a chord of alpha 0.86-1.0);
 with float32 ray-triangle tests beside the edge-on faces it took rays 1e-6 to 5e-6 px
 outside in the last three (the chord where the exact value is nothing). Those faces'
-entries are now decided in float64 (:func:`tetvr.marching.rim_faces`).
+entries are now decided in float64 (:func:`tetvr.mesh.records.rim_faces`).
 """
 
 from __future__ import annotations
@@ -15,9 +15,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from tetvr import Camera, RenderSettings, TetMesh, TransferFunction, synthetic
-from tetvr.marching import EDGE_ON_SINE, march_records, rim_faces
-from tetvr.reference import render_reference
+from tetvr import Camera, RenderSettings, TetMesh, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.mesh.records import EDGE_ON_SINE, march_records, rim_faces
+from tetvr.reference.tets import render_reference
 
 CUBE = synthetic.cube(1, rotate=False)
 CUBE_TF = TransferFunction.preset("viridis", CUBE, opacity=[(0.0, 0.4), (1.0, 0.9)], unit_distance=0.3)

@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, TetMesh, TransferFunction, synthetic
-from tetvr.scene import Scene, load_scene
+from tetvr import Camera, TetMesh, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.scene.scene import Scene
+from tetvr.scene.load import load_scene
 
 from .conftest import shared_file
 
@@ -74,7 +76,7 @@ def test_read_post_vtk_and_cell_data_average(tmp_path):
     assert by_point[(0.0, 0.0, 1.0)] == pytest.approx(1.0)
     with pytest.raises(KeyError, match="point fields"):
         tetvr.read(path, "nope")
-    assert m.report.fields == ("T",)  # the file's fields, for pickers (tetvr.widget)
+    assert m.report.fields == ("T",)  # the file's fields, for pickers (tetvr.apps.viewer.model)
     assert TetMesh.from_arrays(*_tet(), np.ones(4)).report.fields == ()
 
 
@@ -99,7 +101,7 @@ def test_camera_frame_and_validation():
 
 
 def test_bounding_sphere_and_where_fit_looks():
-    from tetvr.camera import bounding_sphere
+    from tetvr.core.camera import bounding_sphere
 
     mesh = synthetic.cube(2)
     centre, radius = bounding_sphere(mesh.bounds)

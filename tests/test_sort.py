@@ -1,7 +1,7 @@
 """Visibility orderings: every face constraint holds, checked against a brute-force oracle.
 
 The oracle below rebuilds the face adjacency with a Python dict and decides each face from
-the raw point coordinates, sharing no code with :mod:`tetvr.adjacency` or the sorters.
+the raw point coordinates, sharing no code with :mod:`tetvr.mesh.adjacency` or the sorters.
 """
 
 from __future__ import annotations
@@ -9,11 +9,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tetvr import Camera, RenderSettings, TetMesh, synthetic
-from tetvr import adjacency as adjacency_mod
-from tetvr import sort as sort_mod
+from tetvr import Camera, RenderSettings, TetMesh
+from tetvr.mesh import synthetic
+from tetvr.mesh import adjacency as adjacency_mod
+from tetvr.order import sort as sort_mod
 from tetvr.settings import SORT_METHODS
-from tetvr.sort import SORTERS, centroid_order, mpvo_order, mpvonc_order, sort_with_stats, visibility_order, xmpvo_order
+from tetvr.order.sort import SORTERS, centroid_order, mpvo_order, mpvonc_order, sort_with_stats, visibility_order, xmpvo_order
 
 GRAPH_SORTS = [mpvo_order, mpvonc_order, xmpvo_order]
 

@@ -14,9 +14,10 @@ import pickle
 import numpy as np
 import pytest
 
-from tetvr import Camera, TransferFunction, synthetic
-from tetvr.cull import submesh
-from tetvr.reference import render_reference
+from tetvr import Camera, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.order.cull import submesh
+from tetvr.reference.tets import render_reference
 
 SIZE = (56, 48)
 

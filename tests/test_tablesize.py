@@ -1,4 +1,4 @@
-"""The "auto" table size (tetvr.tablesize): its error estimates against the true error of
+"""The "auto" table size (tetvr.optics.tablesize): its error estimates against the true error of
 the tables they size, its choices, and its independence of the cells' order."""
 
 from __future__ import annotations
@@ -9,10 +9,13 @@ import math
 import numpy as np
 import pytest
 
-from tetvr import RenderSettings, TransferFunction, optics, synthetic
-from tetvr.cull import submesh
-from tetvr.preintegrate import ALIGN_MIN_FRACTION, aligned_scalar_range, build_table, table_scalar_range
-from tetvr.tablesize import (AUTO_BINS, AUTO_SLICES, MAX_AUTO_ENTRIES, SPAN_BOUNDS, SPAN_STEPS, auto_span,
+from tetvr import RenderSettings, TransferFunction
+from tetvr.optics import model as optics
+from tetvr.mesh import synthetic
+from tetvr.order.cull import submesh
+from tetvr.optics.preintegrate import build_table
+from tetvr.optics.table import ALIGN_MIN_FRACTION, aligned_scalar_range, table_scalar_range
+from tetvr.optics.tablesize import (AUTO_BINS, AUTO_SLICES, MAX_AUTO_ENTRIES, SPAN_BOUNDS, SPAN_STEPS, auto_span,
                              choose_table_size, resolve,
                              sample_segments, scalar_axis_error, segment_sample, thickness_axis_error)
 
@@ -44,7 +47,7 @@ SCENES = {"smooth": smooth_scene, "thick": thick_scene, "spike": spike_scene}
 
 def exact_segments(tf, sf, sb, d, pieces=256):
     """Premultiplied RGBA of segments (scalar linear from sf to sb over length d) by
-    compositing `pieces` exact linear pieces each (tetvr.optics, the reference's integrator)."""
+    compositing `pieces` exact linear pieces each (tetvr.optics.model, the reference's integrator)."""
     t = np.arange(pieces + 1) / pieces
     s = sf[:, None] + (sb - sf)[:, None] * t[None]
     c, a = tf.evaluate(s.ravel())
@@ -165,7 +168,7 @@ def test_auto_table_beats_the_former_fixed_table_where_thickness_limits():
     the optical depth sets) against the former fixed 256 x 256 x 17 at base 1.6. Measured
     at 96x96: 102.0 (15 slices) against 87.7 dB (16 slices); 5 dB is required."""
     from tetvr import Camera, Renderer, psnr
-    from tetvr.reference import render_reference
+    from tetvr.reference.tets import render_reference
 
     mesh, tf = thick_scene()
     cam = Camera.fit(mesh, direction=(-0.5, -1.0, -0.6), view_up=(0, 0, 1))
@@ -250,9 +253,9 @@ def test_aligned_nodes_against_uniform_nodes_on_the_reference():
     The table a renderer uses has the aligned range, and the culling margin that
     settings imply covers its node spacing."""
     from tetvr import Renderer, psnr
-    from tetvr.cull import gpu_scalar_margin
-    from tetvr.reference import render_reference
-    from tetvr.stability import case
+    from tetvr.order.cull import gpu_scalar_margin
+    from tetvr.reference.tets import render_reference
+    from tetvr.scene.stability import case
 
     c = case("camera_inside")
     ref = render_reference(c.mesh, c.camera, c.tf, (96, 96))

@@ -1,4 +1,4 @@
-"""Warped pre-integration tables (tetvr.tablewarp, issue 22 item 3): nodes where the
+"""Warped pre-integration tables (tetvr.optics.tablewarp, issue 22 item 3): nodes where the
 transfer function varies, the warp texture's node index, the entries at uneven nodes, the
 "auto" choice, and isosurface-like transfer functions on the GPU against the reference."""
 
@@ -7,11 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tetvr import Camera, RenderSettings, TransferFunction, synthetic
-from tetvr import preintegrate
-from tetvr.preintegrate import build_table, check_table_size, table_build_bytes
-from tetvr.tablesize import choose_table_size
-from tetvr.tablewarp import WARP_CELLS, warp_cells, warped_nodes
+from tetvr import Camera, RenderSettings, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.optics import preintegrate
+from tetvr.optics.preintegrate import build_table
+from tetvr.optics.table import check_table_size, table_build_bytes
+from tetvr.optics.tablesize import choose_table_size
+from tetvr.optics.tablewarp import WARP_CELLS, warp_cells, warped_nodes
 
 from .conftest import save_failure
 
@@ -128,7 +130,7 @@ def test_isosurface_like_tf_on_the_gpu_meets_the_bar(renderer):
     """Two opacity spikes 1 % of the range wide on a 1296-tet cube, 64x64, default settings
     (a warped table): max error 6.5e-4 and no pixel beyond 1/255 measured (87.7 dB; with
     even nodes, table_warp="off": 0.025, 615 pixels, 50.0 dB). Bars: 0.002, no pixel."""
-    from tetvr.reference import render_reference
+    from tetvr.reference.tets import render_reference
 
     mesh = synthetic.cube(6)
     lo, hi = mesh.scalar_range
@@ -177,7 +179,7 @@ def pipe_flow_opaque_spikes():
     import warnings
 
     import tetvr
-    from tetvr.reference import render_reference
+    from tetvr.reference.tets import render_reference
 
     from .conftest import shared_file
 

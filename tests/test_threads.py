@@ -16,12 +16,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tetvr import Camera, RenderSettings, TransferFunction, synthetic
+from tetvr import Camera, RenderSettings, TransferFunction
+from tetvr.mesh import synthetic
 from tetvr.gl import Raycaster, Renderer
 from tetvr.gl.context import current_in_thread
-from tetvr.raycast_reference import RaycastSettings
+from tetvr.reference.volume import RaycastSettings
 from tetvr.render import default_transfer_function
-from tetvr.volume import Volume
+from tetvr.volume.volume import Volume
 
 pytestmark = pytest.mark.gl
 

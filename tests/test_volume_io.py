@@ -17,17 +17,8 @@ import zlib
 import numpy as np
 import pytest
 
-from tetvr.volume import (
-    Volume,
-    read_dicom,
-    read_metaimage,
-    read_nifti,
-    read_nrrd,
-    read_raw,
-    read_volume,
-    read_vti,
-    read_vtk_structured_points,
-)
+from tetvr.volume.volume import Volume
+from tetvr.io.volume_file import read_dicom, read_metaimage, read_nifti, read_nrrd, read_raw, read_volume, read_vti, read_vtk_structured_points
 
 from .conftest import SHARED, shared_file
 

@@ -1,8 +1,8 @@
-"""tetvr against VTK's unstructured-grid mappers (tetvr.vtkcompare).
+"""tetvr against VTK's unstructured-grid mappers (tetvr.apps.vtkcompare).
 
 VTK is optional (``pip install "tetvr[compare]"``): the tests that render with it skip,
 with the reason, where it is not installed or cannot open an offscreen (EGL) window.
-VTK runs in a child process (tetvr.vtkcompare.VTKProcess), never next to a GL context of
+VTK runs in a child process (tetvr.apps.vtkrender.VTKProcess), never next to a GL context of
 this process.
 """
 
@@ -17,11 +17,14 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, TetMesh, TransferFunction, synthetic
-from tetvr.image import psnr
-from tetvr.reference import render_reference
-from tetvr.scene import Scene
-from tetvr.vtkcompare import PARITY_SETTINGS, VTKProcess, compare, orbit, quantize8, vtk_status
+from tetvr import Camera, TetMesh, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.core.image import psnr
+from tetvr.reference.tets import render_reference
+from tetvr.scene.scene import Scene
+from tetvr.apps.vtkcompare import compare, orbit, quantize8
+from tetvr.apps.vtkrender import VTKProcess, vtk_status
+from tetvr.settings import PARITY_SETTINGS
 
 from .conftest import save_failure, shared_file
 
@@ -269,7 +272,7 @@ def test_compare_writes_pictures_and_tables(vtk_ok, tmp_path):
 
 
 def test_cli_compare(vtk_ok, tmp_path):
-    from tetvr.cli import main
+    from tetvr.apps.cli import main
 
     scene = json.loads((MESHES / "demo.json").read_text())
     scene["mesh"] = str(MESHES / scene["mesh"])

@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, TransferFunction, synthetic
-from tetvr.widget import (OrbitControl, ProgressiveRefiner, RenderRequest, TransferFunctionEditor, ViewerModel,
+from tetvr import Camera, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.apps.viewer.model import (OrbitControl, ProgressiveRefiner, RenderRequest, TransferFunctionEditor, ViewerModel,
                           histogram_image, log_histogram, png_bytes)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -217,11 +218,11 @@ def _scene(tmp_path, size=(80, 60)):
 
 
 def test_model_progressive_frames_reuse_the_order(tmp_path, monkeypatch):
-    import tetvr.sort
+    import tetvr.order.sort
 
     sorts = []
-    real = tetvr.sort.visibility_order
-    monkeypatch.setattr(tetvr.sort, "visibility_order", lambda m, c, s: sorts.append(c) or real(m, c, s))
+    real = tetvr.order.sort.visibility_order
+    monkeypatch.setattr(tetvr.order.sort, "visibility_order", lambda m, c, s: sorts.append(c) or real(m, c, s))
     rec, clock = RecordingRenderer(), Clock()
     model = ViewerModel(_scene(tmp_path), renderer=rec, clock=clock, preview_scale=0.5, settle_s=0.3)
     model.settings = dataclasses.replace(model.settings, method="projected")  # the ray caster needs no order
@@ -279,7 +280,7 @@ class CheckingRenderer(RecordingRenderer):
     """A recording renderer that refuses what the GPU renderer refuses (float32 ranges)."""
 
     def render(self, mesh, camera, tf, *, size, order=None):
-        from tetvr.render import check_float32_range
+        from tetvr.order.precision import check_float32_range
 
         check_float32_range(mesh, tf)
         return super().render(mesh, camera, tf, size=size, order=order)
@@ -405,7 +406,7 @@ class SlowRenderer(RecordingRenderer):
 
 
 def test_preview_sizer_follows_the_measured_cost():
-    from tetvr.widget_loop import PreviewSizer
+    from tetvr.apps.viewer.loop import PreviewSizer
 
     full = (400, 300)
     s = PreviewSizer(budget_s=0.1, min_scale=0.1, max_growth=1.25)
@@ -431,7 +432,7 @@ def test_preview_sizer_follows_the_measured_cost():
 
 
 def test_render_loop_draws_the_latest_state_and_drops_stale_ones(tmp_path):
-    from tetvr.widget_loop import RenderLoop
+    from tetvr.apps.viewer.loop import RenderLoop
 
     rec = SlowRenderer(0.05)
     model = ViewerModel(_scene(tmp_path, size=(80, 60)), renderer=rec)
@@ -474,7 +475,7 @@ def test_render_loop_draws_the_latest_state_and_drops_stale_ones(tmp_path):
 
 
 def test_render_loop_previews_transfer_function_edits_with_the_small_table(tmp_path):
-    from tetvr.widget_loop import RenderLoop
+    from tetvr.apps.viewer.loop import RenderLoop
 
     model = ViewerModel(_scene(tmp_path), renderer=SlowRenderer(0.02))
     seen = []
@@ -498,7 +499,7 @@ def test_render_loop_previews_transfer_function_edits_with_the_small_table(tmp_p
 
 
 def test_render_loop_reports_errors_and_recovers(tmp_path):
-    from tetvr.widget_loop import RenderLoop
+    from tetvr.apps.viewer.loop import RenderLoop
 
     rec = SlowRenderer(0.0)
     frames = []
@@ -519,7 +520,7 @@ def test_render_loop_reports_errors_and_recovers(tmp_path):
 # ---------------------------------------------------------------- the Jupyter viewer (no browser)
 def _viewer(tmp_path, renderer=None, **kw):
     pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
-    from tetvr.widget import Viewer
+    from tetvr.apps.viewer import Viewer
 
     return Viewer(_scene(tmp_path), renderer=renderer or RecordingRenderer(), **kw)
 
@@ -570,20 +571,20 @@ def test_viewer_shows_render_errors(tmp_path):
 
 
 def test_histogram_edits_click_drag_double_click_and_rebuild_little(tmp_path, monkeypatch):
-    import tetvr.sort
-    import tetvr.widget as widget
+    import tetvr.order.sort
+    import tetvr.apps.viewer.model as widget
 
-    from tetvr.widget_jupyter import HIST_SIZE
+    from tetvr.apps.viewer.jupyter import HIST_SIZE
 
     v = _viewer(tmp_path)
     sorts, passes = [], []
-    real_sort, real_hist = tetvr.sort.visibility_order, widget.log_histogram
+    real_sort, real_hist = tetvr.order.sort.visibility_order, widget.log_histogram
     try:
         v.model.settings = dataclasses.replace(v.model.settings, method="projected")
         v.loop.update(final=True)
         assert v.loop.wait_idle(10)
         v._hist_frame()
-        monkeypatch.setattr(tetvr.sort, "visibility_order", lambda *a: sorts.append(1) or real_sort(*a))
+        monkeypatch.setattr(tetvr.order.sort, "visibility_order", lambda *a: sorts.append(1) or real_sort(*a))
         monkeypatch.setattr(widget, "log_histogram", lambda *a: passes.append(1) or real_hist(*a))
         renderer, n = v.model.renderer, len(v.model.editor.points)
         w_px, h_px = HIST_SIZE
@@ -629,7 +630,8 @@ def test_viewer_resizes_with_the_page_keeping_the_aspect(tmp_path):
 
 def test_viewer_takes_a_mesh_file_a_mesh_or_a_scene(tmp_path):
     pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
-    from tetvr.widget import DEFAULT_SIZE, Viewer, scene_of
+    from tetvr.apps.viewer.model import DEFAULT_SIZE, scene_of
+    from tetvr.apps.viewer import Viewer
 
     scene = _scene(tmp_path)
     v = Viewer(tmp_path / "two.vtu", renderer=RecordingRenderer())  # a mesh file is not read as JSON
@@ -686,7 +688,7 @@ def test_viewer_save_load_and_pickers(tmp_path):
 @pytest.mark.gl
 def test_closing_the_widget_stops_the_loop_and_frees_gl(tmp_path):
     pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
-    from tetvr.widget import Viewer
+    from tetvr.apps.viewer import Viewer
 
     v = Viewer(tetvr.demo_scene_path(), size=(48, 36))  # the renderer in its own process
     assert v.loop.wait_idle(60)
@@ -700,12 +702,12 @@ def test_closing_the_widget_stops_the_loop_and_frees_gl(tmp_path):
 
 
 def test_view_without_a_display_says_so(tmp_path, monkeypatch, capsys):
-    from tetvr.cli import main
+    from tetvr.apps.cli import main
 
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    monkeypatch.setattr("tetvr.widget.os.name", "posix")
-    monkeypatch.setattr("tetvr.widget.os.uname", lambda: type("U", (), {"sysname": "Linux"})())
+    monkeypatch.setattr("tetvr.apps.viewer.desktop.os.name", "posix")
+    monkeypatch.setattr("tetvr.apps.viewer.desktop.os.uname", lambda: type("U", (), {"sysname": "Linux"})())
     _scene(tmp_path)
     assert main(["view", str(tmp_path / "scene.json")]) == 3
     err = capsys.readouterr().err
@@ -715,7 +717,7 @@ def test_view_without_a_display_says_so(tmp_path, monkeypatch, capsys):
 @pytest.mark.gl
 def test_process_renderer_draws_what_the_renderer_draws_and_reports_its_errors():
     from tetvr.gl import Renderer
-    from tetvr.widget_process import ProcessRenderer, RenderProcessError
+    from tetvr.apps.viewer.process import ProcessRenderer, RenderProcessError
 
     scene = tetvr.load_scene(tetvr.demo_scene_path())
     cams = [scene.camera, OrbitControl(scene.camera).azimuth(40.0)]
@@ -755,8 +757,8 @@ def _volume():
 
 def test_viewer_fuses_a_volume_with_its_own_editor_and_mode_picker(tmp_path):
     pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
-    from tetvr.widget import FUSION_PICKER
-    from tetvr.widget_jupyter import HIST_SIZE
+    from tetvr.apps.viewer.model import FUSION_PICKER
+    from tetvr.apps.viewer.jupyter import HIST_SIZE
 
     vol = _volume()
     rec = RecordingRenderer()
@@ -787,13 +789,13 @@ def test_viewer_fuses_a_volume_with_its_own_editor_and_mode_picker(tmp_path):
 @pytest.mark.gl
 def test_fused_frames_from_the_render_process_equal_tetvr_fuse():
     from tetvr.fuse import fuse
-    from tetvr.widget import ViewerModel
-    from tetvr.widget_process import ProcessRenderer
+    from tetvr.apps.viewer.model import ViewerModel
+    from tetvr.apps.viewer.process import ProcessRenderer
 
     mesh = synthetic.cube(2)
     vol = _volume()
     cam = Camera.fit(mesh, zoom=0.6)
-    model = ViewerModel(tetvr.widget.scene_of(mesh, size=(32, 24)), renderer="process")
+    model = ViewerModel(tetvr.apps.viewer.model.scene_of(mesh, size=(32, 24)), renderer="process")
     try:
         model.set_volume(vol, mode="interleave")
         model.control.set(cam)
@@ -802,7 +804,7 @@ def test_fused_frames_from_the_render_process_equal_tetvr_fuse():
                     size=(32, 24), mode="interleave")
         assert isinstance(model.renderer, ProcessRenderer) and np.array_equal(got, want)
         assert got[..., 3].max() > 0.05  # the volume shows
-        inproc = ViewerModel(tetvr.widget.scene_of(mesh, size=(32, 24)))
+        inproc = ViewerModel(tetvr.apps.viewer.model.scene_of(mesh, size=(32, 24)))
         try:
             inproc.set_volume(vol, mode="interleave")
             inproc.control.set(cam)
@@ -816,7 +818,7 @@ def test_fused_frames_from_the_render_process_equal_tetvr_fuse():
 def test_a_viewer_nobody_sees_frees_its_renderer_until_the_next_frame(tmp_path, monkeypatch):
     made = _fake_renderers(monkeypatch)
     pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
-    from tetvr.widget import Viewer
+    from tetvr.apps.viewer import Viewer
 
     v = Viewer(_scene(tmp_path), renderer=None, idle_release_s=0.05)
     try:

@@ -1,25 +1,33 @@
-"""tetvr: translucent volume rendering of tetrahedral meshes by projected tetrahedra.
+"""tetvr: translucent volume rendering of tetrahedral meshes on the GPU, measured against an
+exact CPU reference.
 
-The pipeline, one module per stage: :mod:`~tetvr.mesh` -> classification (GPU,
-``shaders/classify.comp``) -> :mod:`~tetvr.sort` -> :mod:`~tetvr.preintegrate` ->
-rasterisation (:mod:`tetvr.gl`) -> image. :mod:`~tetvr.reference` is the exact CPU
-renderer every image is measured against. Nothing here imports OpenGL until a GPU
-renderer is made. :func:`plot` renders and labels a picture in one call (:mod:`~tetvr.annotate`).
+One package per stage, each importing only those below it (docs/architecture.md):
+:mod:`tetvr.io` reads files into :mod:`tetvr.mesh` and :mod:`tetvr.volume` objects;
+:mod:`tetvr.optics` holds the optical model and its tables; :mod:`tetvr.order` decides on
+the CPU what a frame draws and in which order; :mod:`tetvr.gl` draws it (tet marching or
+projected tetrahedra, and the volume ray caster); :mod:`tetvr.reference` is the exact CPU
+renderer every image is measured against. :func:`render` and :func:`fuse` are the one-call
+facade; :mod:`tetvr.scene`, :mod:`tetvr.cluster` and :mod:`tetvr.apps` sit on top. Nothing
+here imports OpenGL until a GPU renderer is made. :func:`plot` renders and labels a picture
+in one call.
 """
 
-from .annotate import Picture, plot, show
-from .camera import Camera
-from .clip import Clip
-from .image import psnr, rmse, write_png
-from .mesh import MeshReport, TetMesh, read
-from .render import render
-from .scene import Scene, demo_scene_path, load_scene
-from .settings import RenderSettings
-from .surface import Surface
-from .transfer import PRESETS, TransferFunction
-from .volume import Volume, read_volume
-from .raycast_reference import RaycastSettings
-from .fuse import FUSION_MODES, RayTextures, fuse
+from tetvr.apps.annotate import Picture, plot, show
+from tetvr.core.camera import Camera
+from tetvr.core.clip import Clip
+from tetvr.core.image import psnr, rmse, write_png
+from tetvr.mesh.tetmesh import MeshReport, TetMesh
+from tetvr.io.meshfile import read
+from tetvr.render import render
+from tetvr.scene.scene import Scene, demo_scene_path
+from tetvr.scene.load import load_scene
+from tetvr.settings import RenderSettings
+from tetvr.core.surface import Surface
+from tetvr.optics.transfer import PRESETS, TransferFunction
+from tetvr.volume.volume import Volume
+from tetvr.io.volume_file import read_volume
+from tetvr.reference.volume import RaycastSettings
+from tetvr.fuse import FUSION_MODES, RayTextures, fuse
 
 __version__ = "0.1.0"
 
@@ -37,6 +45,7 @@ __all__ = [
     "RaycastSettings",
     "Raycaster",
     "Renderer",
+    "Viewer",
     "Volume",
     "fuse",
     "read_volume",
@@ -58,11 +67,15 @@ __all__ = [
 def __getattr__(name: str):
     # The GL renderer is imported on first use, so `import tetvr` needs no OpenGL.
     if name == "Renderer":
-        from .gl.renderer import Renderer
+        from tetvr.gl.renderer import Renderer
 
         return Renderer
     if name == "Raycaster":
-        from .gl.raycaster import Raycaster
+        from tetvr.gl.raycaster import Raycaster
 
         return Raycaster
+    if name == "Viewer":  # the Jupyter viewer imports ipywidgets and jupyter_rfb
+        from tetvr.apps.viewer.jupyter import Viewer
+
+        return Viewer
     raise AttributeError(f"module 'tetvr' has no attribute {name!r}")

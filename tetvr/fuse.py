@@ -6,7 +6,7 @@ The mesh pass yields, per pixel, its premultiplied image and the eye depths of i
 nearest entry and farthest exit (:meth:`tetvr.gl.Renderer.depth_extent`). The volume's
 rays are then cut at those depths (the Holeček thesis's "depth-buffer ray limits"; Ligas
 2009's ray textures generalise them), and the pieces are composited with "over", front
-to back. Both use one optical model (:mod:`tetvr.optics`), so where they meet, the result
+to back. Both use one optical model (:mod:`tetvr.optics.model`), so where they meet, the result
 is what one ray through both media would give.
 
 Modes (``FUSION_MODES``):
@@ -40,10 +40,10 @@ from typing import Any, Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .camera import Camera
-from .mesh import TetMesh
-from .raycast_reference import RaycastSettings, render_volume_reference, volume_ray_intervals
-from .transfer import TransferFunction
+from tetvr.core.camera import Camera
+from tetvr.mesh.tetmesh import TetMesh
+from tetvr.reference.volume import RaycastSettings, render_volume_reference, volume_ray_intervals
+from tetvr.optics.transfer import TransferFunction
 
 __all__ = ["FUSION_MODES", "fuse", "fuse_reference", "over", "RayTextures"]
 
@@ -70,7 +70,7 @@ class RayTextures:
         (0 = where it enters, 1 = where it leaves); the volume is integrated in between.
     mode : optional (H, W) integer image indexing ``modes``: the volume render mode of
         each pixel (e.g. emission–absorption in one region, MIP in another).
-    modes : the mode names ``mode`` indexes (see :mod:`tetvr.raycast_reference`).
+    modes : the mode names ``mode`` indexes (see :mod:`tetvr.reference.volume`).
     """
 
     def __init__(self, start: ArrayLike, end: ArrayLike, mode: ArrayLike | None = None,
@@ -209,7 +209,7 @@ def fuse(
     Parameters
     ----------
     mesh, mesh_tf : the tetrahedral mesh and its transfer function.
-    volume, volume_tf : a :class:`tetvr.volume.Volume` and its transfer function.
+    volume, volume_tf : a :class:`tetvr.volume.volume.Volume` and its transfer function.
     camera, size : the shared view.
     mode : one of :data:`FUSION_MODES`.
     margin : the cut-away margin in pixels (``cutaway``).
@@ -217,14 +217,14 @@ def fuse(
     renderer, raycaster : a :class:`tetvr.gl.Renderer` and a
         :class:`tetvr.gl.raycaster.Raycaster` to reuse (the raycaster should share the
         renderer's context); made and released here if not given.
-    volume_settings : :class:`tetvr.raycast_reference.RaycastSettings` for the volume.
+    volume_settings : :class:`tetvr.reference.volume.RaycastSettings` for the volume.
 
     Returns
     -------
     (height, width, 4) float32 premultiplied RGBA.
     """
-    from .gl.raycaster import Raycaster
-    from .gl.renderer import Renderer
+    from tetvr.gl.raycaster import Raycaster
+    from tetvr.gl.renderer import Renderer
 
     _check_ray_textures(ray_textures, size)
     own_r = renderer is None
@@ -264,8 +264,9 @@ def fuse_reference(
 ) -> Image:
     """The CPU reference of :func:`fuse`: the exact mesh image and the fine-step volume
     march, composited by the same rules. ``mesh_extent`` defaults to the exact depth
-    extents from :func:`tetvr.reference.ray_segments`."""
-    from .reference import ray_segments, render_reference
+    extents from :func:`tetvr.reference.segments.ray_segments`."""
+    from tetvr.reference.tets import render_reference
+    from tetvr.reference.segments import ray_segments
 
     _check_ray_textures(ray_textures, size)
     image = render_reference(mesh, camera, mesh_tf, size)

@@ -7,27 +7,15 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from ._checks import warn
-from .camera import Camera, check_clipping_range
-from .mesh import TetMesh
-from .settings import RenderSettings
-from .transfer import DEFAULT_OPACITY_RAMP, TransferFunction, default_unit_distance, field_range
+from tetvr.core.checks import warn
+from tetvr.core.camera import Camera, check_clipping_range
+from tetvr.mesh.tetmesh import TetMesh
+from tetvr.order.precision import GPU_MIN_RELATIVE_RANGE
+from tetvr.settings import RenderSettings
+from tetvr.optics.transfer import (DEFAULT_OPACITY_RAMP, TransferFunction, default_unit_distance, field_range,
+                                   paraview_unit_distance)
 
 __all__ = ["render", "default_transfer_function"]
-
-# The GPU computes in float32 (points relative to the mesh centre, squared lengths in the
-# classification). Measured on one tet: exact for extents 1e-15 .. 1e19, blank or wrong
-# outside; these bounds keep a margin.
-GPU_EXTENT_RANGE = (1e-13, 1e18)
-# Scalars (of the field and the transfer function) go to the GPU as float32 too: their
-# magnitude must fit, and the table's scalar range must span many float32 steps of it
-# (at 1e-5 of the magnitude, one rounding step is ~1 % of the range).
-GPU_SCALAR_LIMIT = 1e37
-GPU_MIN_RELATIVE_RANGE = 1e-5
-#: The least span of scalars and transfer function the GPU resolves: float32's smallest
-#: normal number is 1.2e-38, and the table's scalar scale (bins / span) must stay finite.
-GPU_MIN_SPAN = 1e-30
-
 
 def _tf_range(lo: float, hi: float) -> tuple[float, float]:
     """A field's range ``(lo, hi)`` as a transfer function's range the GPU can resolve.
@@ -52,23 +40,23 @@ def default_transfer_function(
     scalar_range: tuple[float, float] | None = None,
     unit_distance: float | None = None,
 ) -> TransferFunction:
-    """The default transfer function of a mesh: the one rule of :mod:`tetvr.transfer`.
+    """The default transfer function of a mesh: the one rule of :mod:`tetvr.optics.transfer`.
 
     The range spans the 1st..99.5th percentile of the field weighted by volume
-    (:func:`~tetvr.transfer.robust_range`), the opacity ramps up quadratically across it
-    (:data:`~tetvr.transfer.DEFAULT_OPACITY_RAMP`) so that high values stand out, and the
-    unit distance is 1/20 of the mesh's diagonal (:func:`~tetvr.transfer.default_unit_distance`).
-    Each can be given instead; ``preset`` is any name :func:`tetvr.colormaps.colormap`
+    (:func:`~tetvr.optics.transfer.robust_range`), the opacity ramps up quadratically across it
+    (:data:`~tetvr.optics.transfer.DEFAULT_OPACITY_RAMP`) so that high values stand out, and the
+    unit distance is 1/20 of the mesh's diagonal (:func:`~tetvr.optics.transfer.default_unit_distance`).
+    Each can be given instead; ``preset`` is any name :func:`tetvr.optics.colormaps.colormap`
     takes (tetvr's presets, matplotlib's colormaps).
 
     Examples
     --------
-    >>> from tetvr import synthetic
+    >>> from tetvr.mesh import synthetic
     >>> tf = default_transfer_function(synthetic.cube(2), preset="hot")
     >>> tf.opacity[0][1], tf.opacity[-1][1]  # transparent at the bottom of the range, 0.9 at the top
     (0.0, 0.9)
     """
-    from .colormaps import colormap
+    from tetvr.optics.colormaps import colormap
 
     # robust_range widens a constant field's range as _tf_range does; a given range is the caller's.
     rng = field_range(mesh) if scalar_range is None else scalar_range
@@ -82,8 +70,6 @@ def default_transfer_function(
 
 
 def _paraview_unit(mesh: TetMesh) -> float:
-    from .paraview import paraview_unit_distance
-
     return paraview_unit_distance(mesh.bounds, mesh.n_tets)
 
 
@@ -118,7 +104,7 @@ def render(
     ----------
     mesh : the tetrahedral mesh (see :func:`tetvr.read`).
     camera : defaults to :meth:`Camera.fit`; a camera whose clipping range leaves none of
-        the mesh visible is warned about (:func:`tetvr.camera.check_clipping_range`).
+        the mesh visible is warned about (:func:`tetvr.core.camera.check_clipping_range`).
     tf : defaults to :func:`default_transfer_function` (the data-driven default); a
         function that would leave the picture nearly blank is warned about. With
         ``settings.optics == "vtk"`` (VTK parity) its unit distance is ParaView's default.
@@ -126,9 +112,9 @@ def render(
     settings : GPU method settings.
     method : ``"gpu"`` (OpenGL; ``settings.method`` picks projected tetrahedra or tet
         marching) or ``"reference"`` (the exact CPU ray caster,
-        :func:`tetvr.reference.render_reference`).
+        :func:`tetvr.reference.tets.render_reference`).
     **kwargs : passed on to :meth:`tetvr.Renderer.render` or
-        :func:`tetvr.reference.render_reference`; both take ``clip`` (a :class:`tetvr.Clip`:
+        :func:`tetvr.reference.tets.render_reference`; both take ``clip`` (a :class:`tetvr.Clip`:
         keep part of the mesh, cut exactly) and ``surfaces`` (a sequence of
         :class:`tetvr.Surface`: opaque geometry that ends the rays it meets).
 
@@ -154,44 +140,14 @@ def render(
     else:
         _warn_if_invisible(mesh, tf)
     if method == "reference":
-        from .reference import render_reference
+        from tetvr.reference.tets import render_reference
 
         if settings is not None:
             kwargs.setdefault("optics", settings.optics)
         return render_reference(mesh, camera, tf, size, **kwargs)
     if method != "gpu":
         raise ValueError(f"method must be 'gpu' or 'reference', got {method!r}")
-    from .gl.renderer import Renderer
+    from tetvr.gl.renderer import Renderer
 
     with Renderer(settings) as renderer:
         return renderer.render(mesh, camera, tf, size=size, **kwargs)
-
-
-def check_float32_range(mesh: TetMesh, tf: TransferFunction) -> None:
-    """Refuse scenes the GPU's float32 cannot resolve, rather than return a wrong picture
-    (called by :meth:`tetvr.gl.Renderer.render` for every frame)."""
-    extent = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
-    if not GPU_EXTENT_RANGE[0] <= extent <= GPU_EXTENT_RANGE[1]:
-        raise ValueError(
-            f"the mesh's extent ({extent:.3g}, its bounding-box diagonal) is outside "
-            f"{GPU_EXTENT_RANGE[0]:g} .. {GPU_EXTENT_RANGE[1]:g}, where the GPU's float32 arithmetic is exact; "
-            "rescale the mesh (with the camera and unit_distance) or use method='reference'"
-        )
-    biggest = max(abs(v) for v in (*mesh.scalar_range, *tf.domain))
-    if biggest > GPU_SCALAR_LIMIT:
-        raise ValueError(
-            f"scalar values up to {biggest:.3g} (field or transfer function) are beyond the GPU's float32 "
-            f"(limit {GPU_SCALAR_LIMIT:g}); rescale the field and transfer function or use method='reference'"
-        )
-    lo, hi = min(mesh.scalar_range[0], tf.domain[0]), max(mesh.scalar_range[1], tf.domain[1])
-    if lo < hi and hi - lo < GPU_MIN_SPAN:
-        raise ValueError(
-            f"the scalars and transfer function span {lo!r} .. {hi!r} ({hi - lo:.3g}), below {GPU_MIN_SPAN:g}, "
-            "which the GPU's float32 cannot resolve (its numbers go subnormal near 1e-38); scale the field and "
-            "the transfer function (mesh.with_scalars) or use method='reference'")
-    if lo < hi and hi - lo < GPU_MIN_RELATIVE_RANGE * max(abs(lo), abs(hi)):
-        raise ValueError(
-            f"the scalars and transfer function span {lo!r} .. {hi!r}, too narrow for their magnitude in the "
-            f"GPU's float32 (below {GPU_MIN_RELATIVE_RANGE:g} of it); subtract an offset from the field and "
-            "the transfer function (mesh.with_scalars) or use method='reference'"
-        )

@@ -8,24 +8,24 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .optics import OPTICS
-from .preintegrate import check_table_size
-from .tablesize import AUTO_BINS, DEFAULT_TOLERANCE
+from tetvr.optics.model import OPTICS
+from tetvr.optics.table import check_table_size
+from tetvr.optics.tablesize import AUTO_BINS, DEFAULT_TOLERANCE
 
-__all__ = ["RenderSettings", "SORT_METHODS", "TABLE_ENCODINGS", "TABLE_DTYPES", "TABLE_WARPS"]
+__all__ = ["PARITY_SETTINGS", "RenderSettings", "SORT_METHODS", "TABLE_ENCODINGS", "TABLE_DTYPES", "TABLE_WARPS"]
 
-#: Visibility orderings (see :mod:`tetvr.sort`).
+#: Visibility orderings (see :mod:`tetvr.order.sort`).
 SORT_METHODS = ("auto", "centroid", "mpvo", "mpvonc", "xmpvo", "none")
-#: How the pre-integration table is stored and looked up (see :mod:`tetvr.preintegrate`).
+#: How the pre-integration table is stored and looked up (see :mod:`tetvr.optics.preintegrate`).
 TABLE_ENCODINGS = ("normalized", "premultiplied")
 TABLE_DTYPES = ("float32", "uint8")
-#: Whether the table's scalar nodes are warped to the transfer function (see tetvr.tablewarp).
+#: Whether the table's scalar nodes are warped to the transfer function (see tetvr.optics.tablewarp).
 TABLE_WARPS = ("auto", "on", "off")
 #: Interpolation of the table along its thickness axis.
 TABLE_FILTERS = ("linear", "cubic")
 #: Storage of the compositing target.
 FRAMEBUFFERS = ("float32", "uint8")
-#: The two GPU methods (see :mod:`tetvr.method`): projected tetrahedra or tet marching.
+#: The two GPU methods (see :mod:`tetvr.order.method`): projected tetrahedra or tet marching.
 METHODS = ("auto", "projected", "raymarch")
 #: How a ray--tet segment is integrated: a pre-integration table lookup, or exactly.
 INTEGRATIONS = ("table", "exact")
@@ -44,17 +44,17 @@ class RenderSettings:
         ``"mpvo"`` (Williams' MPVO: exact for convex meshes), ``"mpvonc"`` (MPVO with
         Williams' non-convex heuristic; cycles are broken and counted), ``"xmpvo"``
         (MPVONC plus edges from rays through the boundary, right between separate and
-        interlocking parts; see :mod:`tetvr.boundary`) or ``"none"`` (input order; only
+        interlocking parts; see :mod:`tetvr.order.boundary`) or ``"none"`` (input order; only
         for measurements).
     table_scalar_bins : N, samples of the scalar axis of the pre-integration table, or
-        ``"auto"`` (default): 256 or 512, whichever the scene needs (:mod:`tetvr.tablesize`
+        ``"auto"`` (default): 256 or 512, whichever the scene needs (:mod:`tetvr.optics.tablesize`
         estimates each size's error from the transfer function and the mesh's cells).
     table_thickness_slices : K, thickness slices on the logarithmic axis, or ``"auto"``
         (default): 8, 15, 22, 29 or 43 slices, the fewest the scene needs (most scenes: 8;
         thick, strongly absorbing segments across colour changes: more), spanning
         thicknesses from d_max / span to d_max with the span the optical depth of the
         thickest segment at the largest extinction, at least 8
-        (:func:`tetvr.tablesize.auto_span`).
+        (:func:`tetvr.optics.tablesize.auto_span`).
     table_log_base : ratio between consecutive thickness slices when K is given (not used
         by ``"auto"`` slices). 1.6 spans d_max / 1150 to d_max with 16 slices; measured
         against the reference it beats base 2 (a 33000x span) by up to 8 dB where colour
@@ -66,14 +66,14 @@ class RenderSettings:
         the reference), not on CFD meshes with spiky transfer functions (see ``table_warp``).
     table_align_nodes : place the table's scalar nodes so that the transfer function's
         control points, the sharpest kinks first, fall on nodes
-        (:func:`tetvr.preintegrate.aligned_scalar_range`; default ``True``), rather than
+        (:func:`tetvr.optics.table.aligned_scalar_range`; default ``True``), rather than
         evenly over the range (``False``, the former behaviour): a control point between
         nodes is cut off by the table's linear ramp between them. Even nodes are kept
         where a ramp spans fewer than ten of them (there placement is a lottery).
     table_warp : ``"auto"`` (default), ``"on"`` or ``"off"``: a *warped* table, whose scalar
         nodes are dense where the transfer function varies and lie on its control points
-        (:mod:`tetvr.tablewarp`), instead of evenly spaced ones. ``"auto"`` takes one where
-        the scene's estimated error (:mod:`tetvr.tablesize`) says no even table meets the
+        (:mod:`tetvr.optics.tablewarp`), instead of evenly spaced ones. ``"auto"`` takes one where
+        the scene's estimated error (:mod:`tetvr.optics.tablesize`) says no even table meets the
         tolerance: isosurface-like transfer functions, whose narrow spikes fall between even
         nodes (on the bluntfin and pipe-flow meshes 35-64 dB even, 62-97 dB warped;
         docs/limits.md). Both GPU methods read it through a small texture that gives the
@@ -90,13 +90,13 @@ class RenderSettings:
     perspective_correct : interpolate front/back scalars and thickness
         perspective-correctly (Kraus et al. 2004) rather than linearly in screen space.
     cull : drop cells outside the view, or whose scalars map to zero opacity, before
-        drawing (:mod:`tetvr.cull`; the image is unchanged, the count is in the stats).
+        drawing (:mod:`tetvr.order.cull`; the image is unchanged, the count is in the stats).
     framebuffer : ``"float32"`` compositing target, or ``"uint8"`` (what 8-bit
         renderers such as VTK's do; for measuring what float compositing buys).
     method : the GPU method: ``"projected"`` (projected tetrahedra: every cell classified,
         sorted and rasterised), ``"raymarch"`` (tet marching: every pixel's ray walks the
         cells it crosses, one exact segment each, in visibility order by construction; no
-        sort) or ``"auto"`` (default: the one :func:`tetvr.method.choose` expects to be
+        sort) or ``"auto"`` (default: the one :func:`tetvr.order.method.choose` expects to be
         faster for the scene; see docs/methods.md). Both read the same table and return
         the same premultiplied image; ``sort``, ``cull`` and ``perspective_correct`` apply
         to projected tetrahedra only.
@@ -108,7 +108,7 @@ class RenderSettings:
         ray caster). No table error at all, so any transfer function, spikes included, is
         as exact as a smooth one, and a segment cut in two (sort-last bricks) integrates to
         what the whole does; each segment costs more than a lookup (docs/methods.md).
-    optics : how transfer-function opacity becomes light (:data:`tetvr.optics.OPTICS`):
+    optics : how transfer-function opacity becomes light (:data:`tetvr.optics.model.OPTICS`):
         ``"exact"`` (``tau = -ln(1 - a)/u``, the default), ``"linear"`` (``tau = a/u``, the
         convention of VTK's unstructured-grid mappers, integrated exactly) or ``"vtk"``
         (``tau = a/u`` and the mean of a segment's end colours, VTK's projected-tetrahedra
@@ -117,7 +117,7 @@ class RenderSettings:
         perspective thickness table, screen-linear interpolation, its drawing order with
         ``sort="auto"``; :mod:`tetvr.gl.vtkpt`), so the table settings and
         ``perspective_correct`` do not apply to it; the CPU reference computes the formula on
-        exact geometry. ``tetvr.vtkcompare.PARITY_SETTINGS``; see docs/paraview.md.
+        exact geometry. ``tetvr.settings.PARITY_SETTINGS``; see docs/paraview.md.
 
     Examples
     --------
@@ -200,7 +200,7 @@ class RenderSettings:
         object.__setattr__(self, "perspective_correct", bool(self.perspective_correct))
         # Memory and arithmetic, before any frame: the build's peak memory of explicit sizes,
         # and the span of an explicit thickness axis (base ** (K - 1) overflows past ~1e308).
-        # An "auto" axis takes sizes whose tables stay small (see tetvr.tablesize).
+        # An "auto" axis takes sizes whose tables stay small (see tetvr.optics.tablesize).
         n, k = self.table_scalar_bins, self.table_thickness_slices
         if k != "auto":
             check_table_size(n if n != "auto" else min(AUTO_BINS), int(k), self.table_log_base,
@@ -216,3 +216,14 @@ class RenderSettings:
         if unknown:
             raise ValueError(f"unknown settings keys {sorted(unknown)}; expected some of {sorted(names)}")
         return cls(**data)
+
+
+#: tetvr's VTK parity: ``optics="vtk"`` on the GPU draws VTK's projected tetrahedra with
+#: VTK's own steps (:mod:`tetvr.gl.vtkpt`: 8-bit vertex colours, its thick vertex and
+#: class-2 opacity, its perspective thickness table, screen-linear interpolation, its
+#: drawing order). VTK composites in a float target (``UseFloatingPointFrameBuffer``, on by
+#: default) and rounds to 8 bits once, when it copies to the window: so the target stays
+#: float here and :func:`tetvr.apps.vtkcompare.compare` rounds the final image
+#: (:func:`~tetvr.apps.vtkcompare.quantize8`). What remains
+#: different is listed in docs/paraview.md ("What parity does not reproduce").
+PARITY_SETTINGS = RenderSettings(optics="vtk", perspective_correct=False)

@@ -25,8 +25,8 @@ from hypothesis.extra.numpy import arrays
 
 from tetvr import PRESETS, Camera, RenderSettings, TetMesh, TransferFunction
 from tetvr.gl import Renderer
-from tetvr.image import psnr
-from tetvr.reference import render_reference
+from tetvr.core.image import psnr
+from tetvr.reference.tets import render_reference
 
 pytestmark = pytest.mark.gl
 

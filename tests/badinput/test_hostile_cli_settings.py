@@ -15,15 +15,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tetvr import Camera, RenderSettings, TransferFunction, synthetic
-from tetvr import image as image_mod
-from tetvr.cli import EXIT_ENVIRONMENT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_MEMORY, EXIT_USAGE, main
-from tetvr.image import write_png
-from tetvr.preintegrate import MIN_UNIT_DISTANCE, build_table
-from tetvr.raycast_reference import RaycastSettings, render_volume_reference
-from tetvr.reference import render_reference
+from tetvr import Camera, RenderSettings, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.core import image as image_mod
+from tetvr.apps.cli import EXIT_ENVIRONMENT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_MEMORY, EXIT_USAGE, main
+from tetvr.core.image import write_png
+from tetvr.optics.preintegrate import build_table
+from tetvr.optics.table import MIN_UNIT_DISTANCE
+from tetvr.reference.volume import RaycastSettings, render_volume_reference
+from tetvr.reference.tets import render_reference
 from tetvr.render import default_transfer_function
-from tetvr.tablesize import choose_table_size
+from tetvr.optics.tablesize import choose_table_size
 
 from ._util import POST_VTK
 
@@ -130,7 +132,7 @@ def test_write_png_replaces_a_hard_link_instead_of_writing_through_it(tmp_path):
 
 
 def test_scene_save_refuses_its_own_mesh(scene_dir):
-    from tetvr.scene import load_scene
+    from tetvr.scene.load import load_scene
 
     scene = load_scene(scene_dir / "scene.json")
     before = (scene_dir / "post.vtk").read_bytes()
@@ -170,7 +172,7 @@ def test_every_failure_is_one_line_and_a_documented_status(monkeypatch, capsys, 
     def read(*args, **kwargs):
         raise make_exc()
 
-    monkeypatch.setattr("tetvr.mesh.read", read)
+    monkeypatch.setattr("tetvr.io.meshfile.read", read)
     assert main(["info", "mesh.vtu"]) == status
     assert words in _one_error_line(capsys.readouterr().err)
 
@@ -393,7 +395,7 @@ def test_raycaster_refuses_settings_of_another_type(settings):
 
 
 def test_volume_reference_refuses_settings_of_another_type():
-    from tetvr.volume import Volume
+    from tetvr.volume.volume import Volume
 
     vol = Volume.from_array(np.zeros((2, 2, 2)))
     tf = TransferFunction.preset("grayscale", (0, 1))

@@ -25,9 +25,10 @@ import pytest
 
 import tetvr
 from tetvr import TetMesh
-from tetvr.cells import read_cells, read_legacy_vtk
+from tetvr.io.legacy_vtk import read_legacy_vtk
+from tetvr.io.meshfile import read_cells
 from tetvr.fuse import compose
-from tetvr.volume import read_dicom, read_metaimage, read_nifti, read_nrrd, read_volume, read_vti
+from tetvr.io.volume_file import read_dicom, read_metaimage, read_nifti, read_nrrd, read_volume, read_vti
 
 from ._util import POINTS, SCALARS, deadline
 
@@ -43,7 +44,7 @@ def _quiet_read(path: Path, *args: object, **kwargs: object) -> TetMesh:
 
 
 # ---------------------------------------------------------------------------------
-# 1. Legacy VTK (the fallback reader of tetvr.cells): declared counts vs the file
+# 1. Legacy VTK (the fallback reader of tetvr.mesh.cells): declared counts vs the file
 # ---------------------------------------------------------------------------------
 
 _VTK_HEAD = "# vtk DataFile Version 3.0\nhostile\n{mode}\nDATASET UNSTRUCTURED_GRID\n"

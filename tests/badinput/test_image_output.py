@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tetvr.image import psnr, rmse, write_png
+from tetvr.core.image import psnr, rmse, write_png
 
 GOOD = np.zeros((4, 5, 4), dtype=np.float32)
 

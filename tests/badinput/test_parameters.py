@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from tetvr import Camera, RenderSettings, TransferFunction, synthetic
+from tetvr import Camera, RenderSettings, TransferFunction
+from tetvr.mesh import synthetic
 
 NAN = float("nan")
 

@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, RenderSettings, TetMesh, TransferFunction, synthetic
-from tetvr.reference import render_reference
-from tetvr.render import GPU_EXTENT_RANGE, default_transfer_function
+from tetvr import Camera, RenderSettings, TetMesh, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.reference.tets import render_reference
+from tetvr.render import default_transfer_function
+from tetvr.order.precision import GPU_EXTENT_RANGE
 
 from ._util import POINTS, SCALARS, TETS
 

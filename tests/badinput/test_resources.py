@@ -15,7 +15,8 @@ import sys
 import numpy as np
 import pytest
 
-from tetvr import Camera, RenderSettings, TransferFunction, synthetic
+from tetvr import Camera, RenderSettings, TransferFunction
+from tetvr.mesh import synthetic
 from tetvr.gl import Renderer
 from tetvr.render import default_transfer_function
 

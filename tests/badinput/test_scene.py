@@ -9,8 +9,8 @@ import shutil
 
 import pytest
 
-from tetvr.cli import main
-from tetvr.scene import load_scene
+from tetvr.apps.cli import main
+from tetvr.scene.load import load_scene
 
 from ._util import POST_VTK
 

@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 import tetvr
-from tetvr import Camera, RenderSettings, TetMesh, TransferFunction, synthetic
-from tetvr.precision import check_view_precision
-from tetvr.reference import render_reference
+from tetvr import Camera, RenderSettings, TetMesh, TransferFunction
+from tetvr.mesh import synthetic
+from tetvr.order.precision import check_view_precision
+from tetvr.reference.tets import render_reference
 
 pytestmark = pytest.mark.gl
 

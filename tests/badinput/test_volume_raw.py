@@ -1,4 +1,4 @@
-"""Bad raw volumes (``tetvr.volume.read_raw``): a file whose size does not match
+"""Bad raw volumes (``tetvr.io.volume_file.read_raw``): a file whose size does not match
 dims x dtype, nonsense geometry or types - each a ValueError (FileNotFoundError for a
 missing file) naming the value; the voxels are never reinterpreted silently."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tetvr import volume
+from tetvr.io.volume_file import read_raw
 
 
 @pytest.fixture
@@ -41,16 +41,16 @@ RAW_BAD = [
 @pytest.mark.parametrize("kwargs,match", [c[1:] for c in RAW_BAD], ids=[c[0] for c in RAW_BAD])
 def test_bad_raw_volume(raw, kwargs, match):
     with pytest.raises(ValueError, match=match):
-        volume.read_raw(raw, **kwargs)
+        read_raw(raw, **kwargs)
 
 
 def test_raw_volume_file_missing(tmp_path):
     with pytest.raises(FileNotFoundError, match="nothere.raw"):
-        volume.read_raw(tmp_path / "nothere.raw", dims=(1, 1, 1), dtype="uint8")
+        read_raw(tmp_path / "nothere.raw", dims=(1, 1, 1), dtype="uint8")
 
 
 def test_good_raw_volume_reads(raw):
-    vol = volume.read_raw(raw, dims=(2, 3, 4), dtype="uint8", spacing=(0.5, 1, 2))
+    vol = read_raw(raw, dims=(2, 3, 4), dtype="uint8", spacing=(0.5, 1, 2))
     assert vol.dims == (2, 3, 4) and vol.data[3, 2, 1] == 3 * 6 + 2 * 2 + 1
 
 
@@ -61,4 +61,4 @@ def test_float_raw_volume_with_nan_or_inf(tmp_path, bad):
     path = tmp_path / "f.raw"
     data.tofile(path)
     with pytest.raises(ValueError, match="data contain 1 NaN or Inf"):
-        volume.read_raw(path, dims=(2, 2, 2), dtype="float32")
+        read_raw(path, dims=(2, 2, 2), dtype="float32")

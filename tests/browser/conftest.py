@@ -22,7 +22,7 @@ def lab(tmp_path_factory):
     if not POST.is_file():
         pytest.skip(f"shared data not available: {POST} (clone with ../shared beside the repo)")
     root = tmp_path_factory.mktemp("lab")
-    write_notebook(root / "viewer.ipynb", f"from tetvr.widget import Viewer\nviewer = Viewer({str(POST)!r}, size={SIZE!r})\nviewer")
+    write_notebook(root / "viewer.ipynb", f"from tetvr.apps.viewer import Viewer\nviewer = Viewer({str(POST)!r}, size={SIZE!r})\nviewer")
     try:
         url, token, stop = start_lab(root)
     except RuntimeError as exc:

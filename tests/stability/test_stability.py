@@ -22,10 +22,10 @@ import warnings
 import numpy as np
 import pytest
 
-from tetvr.image import psnr
-from tetvr.method import choose
-from tetvr.reference import render_reference
-from tetvr.stability import CASES, case
+from tetvr.core.image import psnr
+from tetvr.order.method import choose
+from tetvr.reference.tets import render_reference
+from tetvr.scene.stability import CASES, case
 
 from ..conftest import save_failure
 
@@ -54,7 +54,7 @@ def test_case_against_reference(renderer, name):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # dropped zero-volume tets are reported, not errors
         c = case(name)
-    from tetvr.marching import folded_faces
+    from tetvr.mesh.records import folded_faces
 
     if renderer.settings.method == "raymarch" and folded_faces(c.mesh):
         # A tangled mesh (overlapping cells): tet marching says it cannot follow it, and

@@ -3,18 +3,18 @@
 :class:`Renderer` owns an EGL context and every GL object made in it.
 """
 
-from .context import GLUnavailableError
+from tetvr.gl.context import GLUnavailableError
 
 __all__ = ["GLUnavailableError", "Raycaster", "Renderer"]
 
 
 def __getattr__(name: str):  # deferred so that `import tetvr.gl` stays cheap
     if name == "Renderer":
-        from .renderer import Renderer
+        from tetvr.gl.renderer import Renderer
 
         return Renderer
     if name == "Raycaster":
-        from .raycaster import Raycaster
+        from tetvr.gl.raycaster import Raycaster
 
         return Raycaster
     raise AttributeError(name)

@@ -7,9 +7,9 @@ it is made, and downsampled with a warning when an axis exceeds the GPU's larges
 texture. Per transfer function and step (once), for emission-absorption: either the
 control points (``integration="exact"``: ``raycast_exact.glsl`` cuts each piece at them
 and integrates in closed form) or the pre-integration table
-(:func:`tetvr.preintegrate.table_for` with aligned nodes, whose top thickness slice is the
+(:func:`tetvr.optics.preintegrate.table_for` with aligned nodes, whose top thickness slice is the
 step; refused before it is built when the GL or the memory cannot hold it); "auto" picks
-(:mod:`tetvr.raycast_size`); every mode reads the transfer function's control points, so
+(:mod:`tetvr.optics.raycast_size`); every mode reads the transfer function's control points, so
 a maximum or mean is classified exactly. Per
 frame: the optional per-pixel ray limits go to a texture, one full-screen triangle runs
 ``raycast.frag``, and the RGBA32F target is read back.
@@ -27,16 +27,17 @@ from typing import Any, Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._checks import check_instances
-from ..camera import Camera
-from ..image import _gib, check_memory
-from ..preintegrate import PreintegrationTable, check_unit_distance, table_build_bytes, table_for, table_scalar_range
-from ..raycast_reference import INTEGRATIONS, INTERPOLATIONS, RAYCAST_MODES, RaycastSettings, normalize_ray_limits
-from ..transfer import TransferFunction
-from ..volume import Volume
-from .context import context_alive, create_context, describe
-from .shaders import ShaderCompileError, assemble, explain
-from .util import (_LLVMPIPE_TEXTURE_BYTES, _SOFTWARE_GL, Clock, GLOwner, check_size, clear_gl_errors,
+from tetvr.core.checks import check_instances
+from tetvr.core.camera import Camera
+from tetvr.core.image import _gib, check_memory
+from tetvr.optics.preintegrate import table_for
+from tetvr.optics.table import PreintegrationTable, check_unit_distance, table_build_bytes, table_scalar_range
+from tetvr.reference.volume import INTEGRATIONS, INTERPOLATIONS, RAYCAST_MODES, RaycastSettings, normalize_ray_limits
+from tetvr.optics.transfer import TransferFunction
+from tetvr.volume.volume import Volume
+from tetvr.gl.context import context_alive, create_context, describe
+from tetvr.gl.shaders import ShaderCompileError, assemble, explain
+from tetvr.gl.util import (_LLVMPIPE_TEXTURE_BYTES, _SOFTWARE_GL, Clock, GLOwner, check_size, clear_gl_errors,
                    free_video_memory, gl_locked, locked, make_target, set_uniforms, table_texture, tf_points_texture)
 
 __all__ = ["Raycaster", "RaycastStats", "MODES"]
@@ -50,7 +51,7 @@ class _Mode:
     integrates: bool  # emission-absorption along the ray (else one classification per pixel)
 
 
-#: Rendering mode -> shader variant (see :class:`~tetvr.raycast_reference.RaycastSettings`).
+#: Rendering mode -> shader variant (see :class:`~tetvr.reference.volume.RaycastSettings`).
 MODES: dict[str, _Mode] = {
     "emission_absorption": _Mode(defines=(("RAYCAST_MODE", 0),), integrates=True),
     "mip": _Mode(defines=(("RAYCAST_MODE", 1),), integrates=False),
@@ -378,6 +379,30 @@ class Raycaster(GLOwner):
         gpu = self._use_volume(volume)
         use_limits = self._use_limits(t_start, t_end, (width, height))
         clock.lap("upload")
+        integration, uses_table, scalar_range, table_uniforms = self._use_optics(volume, tf, s)
+        clock.lap("table")
+
+        uniforms, max_steps = self._view_uniforms(volume, gpu, camera, tf, s, (width, height), use_limits,
+                                                  scalar_range)
+        prog = self._program(s.mode, s.interpolation, integration)
+        uniforms.update(table_uniforms)  # its u_scalar_range is scalar_range
+        self._draw(prog, uniforms, (width, height), uses_table, use_limits)
+        clock.lap("draw")
+        raw = self._fbo.read(components=4, dtype="f4")
+        image = np.frombuffer(raw, dtype=np.float32).reshape(height, width, 4)[::-1].copy()
+        clock.lap("readback")
+        err = self.ctx.error
+        if err != "GL_NO_ERROR":
+            raise RuntimeError(f"OpenGL error after ray casting: {err}")
+        self.last_stats = RaycastStats(size=(width, height), volume_dims=gpu.dims, max_steps=max_steps, **clock.laps)
+        return image
+
+    def _use_optics(self, volume: Volume, tf: TransferFunction, s: RaycastSettings
+                    ) -> tuple[str, bool, tuple[float, float], dict[str, Any]]:
+        """The frame's integration (``"table"`` for the modes that integrate nothing), whether
+        it reads the pre-integration table (then built and uploaded), the scalar range the
+        shaders map onto the transfer function, and the table's or the exact integral's
+        uniforms. Also uploads the transfer function's points."""
         mode = MODES[s.mode]
         # Ranges come from the original volume: downsampling only narrows them. A table
         # may span more (its nodes aligned on the transfer function's control points):
@@ -394,8 +419,14 @@ class Raycaster(GLOwner):
             table_uniforms = table.gl_uniforms()
             scalar_range = table.scalar_range
         self._use_tf_points(tf)
-        clock.lap("table")
+        return integration, uses_table, scalar_range, table_uniforms
 
+    def _view_uniforms(self, volume: Volume, gpu: Volume, camera: Camera, tf: TransferFunction, s: RaycastSettings,
+                       size: tuple[int, int], use_limits: bool, scalar_range: tuple[float, float]
+                       ) -> tuple[dict[str, Any], int]:
+        """raycast.frag's uniforms for this view of the uploaded volume ``gpu`` (but the
+        table's), and the most steps a ray takes."""
+        width, height = size
         step = s.step_for(volume, tf)
         # Regular steps, plus one sample per voxel-index plane the ray crosses (raycast.frag).
         max_steps = int(math.ceil(gpu.diagonal / step)) + sum(gpu.dims) + 3
@@ -413,7 +444,6 @@ class Raycaster(GLOwner):
         a_inv = gpu.world_to_index[:3, :3]
         clip_lo, clip_hi = (np.asarray(s.clip_box[0]) - centre, np.asarray(s.clip_box[1]) - centre) \
             if s.clip_box is not None else (np.zeros(3), np.zeros(3))
-        prog = self._program(s.mode, s.interpolation, integration)
         uniforms = dict(
             u_inv_viewport=(1.0 / width, 1.0 / height), u_perspective=0 if camera.parallel_projection else 1,
             u_k=(k * aspect, k), u_eye_to_index=eye_to_index, u_eye_to_local=eye_to_local,
@@ -426,13 +456,18 @@ class Raycaster(GLOwner):
             u_inv_dims=tuple(1.0 / n for n in gpu.dims), u_value_scale=self._value_scale,
             u_scalar_range=scalar_range, u_volume=1, u_tf_points=2, u_tf_count=self._tf_points_tex.width,
             u_limits=3)
-        uniforms.update(table_uniforms)  # its u_scalar_range is scalar_range
-        set_uniforms(prog, **uniforms)
-        self._use_target((width, height))
-        self._fbo.use()
-        self._fbo.clear(0.0, 0.0, 0.0, 0.0)
+        return uniforms, max_steps
+
+    def _draw(self, prog: Any, uniforms: dict[str, Any], size: tuple[int, int], uses_table: bool,
+              use_limits: bool) -> None:
+        """One full-screen triangle of ``prog`` into the cleared target, the table (if used),
+        volume, transfer function points and ray limits bound to units 0-3."""
         import moderngl
 
+        set_uniforms(prog, **uniforms)
+        self._use_target(size)
+        self._fbo.use()
+        self._fbo.clear(0.0, 0.0, 0.0, 0.0)
         if uses_table:
             self._table_tex.use(0)
         self._volume_tex.use(1)
@@ -443,12 +478,3 @@ class Raycaster(GLOwner):
         if vao is None:
             vao = self._vaos[id(prog)] = self.ctx.vertex_array(prog, [])
         vao.render(moderngl.TRIANGLES, vertices=3)
-        clock.lap("draw")
-        raw = self._fbo.read(components=4, dtype="f4")
-        image = np.frombuffer(raw, dtype=np.float32).reshape(height, width, 4)[::-1].copy()
-        clock.lap("readback")
-        err = self.ctx.error
-        if err != "GL_NO_ERROR":
-            raise RuntimeError(f"OpenGL error after ray casting: {err}")
-        self.last_stats = RaycastStats(size=(width, height), volume_dims=gpu.dims, max_steps=max_steps, **clock.laps)
-        return image

@@ -2,7 +2,7 @@
 
 Owned by a :class:`~tetvr.gl.renderer.Renderer` (its context, its table texture, its
 programs), chosen by ``RenderSettings(method="raymarch")``. Per mesh (once): the records of
-:func:`tetvr.marching.march_records` go to textures read as images with ``imageLoad`` (on
+:func:`tetvr.mesh.records.march_records` go to textures read as images with ``imageLoad`` (on
 llvmpipe several times faster in the walk's loop than the same reads from a storage
 buffer, and faster than ``texelFetch``) and the boundary faces to a vertex buffer. Per
 view, the points relative to the eye (float64, then float32), and then layer by layer:
@@ -34,17 +34,15 @@ from __future__ import annotations
 
 import dataclasses
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import Camera
-from ..marching import RECORD_TEXELS, MarchRecords, folded_faces, march_records, near_plane_cells, rim_faces
-from ..mesh import TetMesh
-
-if TYPE_CHECKING:
-    from .renderer import Renderer
+from tetvr.core.camera import Camera
+from tetvr.mesh.records import RECORD_TEXELS, MarchRecords, folded_faces, march_records, near_plane_cells, rim_faces
+from tetvr.mesh.tetmesh import TetMesh
+from tetvr.gl.host import ProgramHost
 
 __all__ = ["Marcher", "MarchStats", "raymarch_capacity"]
 
@@ -88,7 +86,7 @@ _PREFETCH = ThreadPoolExecutor(max_workers=1, thread_name_prefix="tetvr-records"
 
 
 def _records(mesh: TetMesh) -> tuple[MarchRecords, int]:
-    """The records of ``mesh`` and its folded faces (:func:`~tetvr.marching.folded_faces`)."""
+    """The records of ``mesh`` and its folded faces (:func:`~tetvr.mesh.records.folded_faces`)."""
     folds = folded_faces(mesh)
     return march_records(mesh), folds
 
@@ -137,7 +135,7 @@ def raymarch_capacity(max_texture_size: int) -> int:
 
 @dataclasses.dataclass(frozen=True)
 class _Rim:
-    """One view's :func:`~tetvr.marching.rim_faces` on the GL: vertex buffers of the
+    """One view's :func:`~tetvr.mesh.records.rim_faces` on the GL: vertex buffers of the
     rectangles (6 corners a face), of each face's corners in float64 and of its slot, and an
     index buffer of the boundary faces the rasteriser draws (``n_drawn`` indices)."""
 
@@ -160,7 +158,7 @@ class MarchStats:
     after the first (not for a convex mesh; else they peel: a pixel overflowed the list,
     or the frame is too tall or too large for one), the cells the near plane cut and the boundary faces
     whose entries were decided by a float64 ray-triangle test beside faces seen edge-on
-    (:func:`~tetvr.marching.rim_faces`)."""
+    (:func:`~tetvr.mesh.records.rim_faces`)."""
 
     layers: int = 0
     layers_exhausted: bool = False
@@ -172,7 +170,7 @@ class MarchStats:
 class Marcher:
     """GL state of the tet-marching ray caster for one :class:`Renderer`."""
 
-    def __init__(self, owner: "Renderer") -> None:
+    def __init__(self, owner: ProgramHost) -> None:
         self.owner = owner
         self.ctx = owner.ctx
         self._mesh: TetMesh | None = None
@@ -238,7 +236,7 @@ class Marcher:
         pending, self._prefetch = self._prefetch, None
         rec, folds = pending[1].result() if pending is not None and pending[0] is mesh else _records(mesh)
         if folds:
-            from .._checks import warn
+            from tetvr.core.checks import warn
 
             warn(f"the mesh is tangled: {folds} interior faces have both their cells on one side (cells "
                  f"overlap in space); tet marching follows faces and renders it wrong: use "
@@ -248,7 +246,7 @@ class Marcher:
             raise MemoryError(f"the ray caster holds at most {raymarch_capacity(max_tex)} tets and points in one texture "
                               f"on this GL (GL_MAX_TEXTURE_SIZE {max_tex}); the mesh has {mesh.n_tets} tets, "
                               f"{mesh.n_points} points: use "
-                              f"method=\"projected\" or split it into bricks (tetvr.cull.submesh)")
+                              f"method=\"projected\" or split it into bricks (tetvr.order.cull.submesh)")
         layout = _Layout.of(max_tex)
 
         def texture(items: NDArray[Any], per_row: int, texels: int, fill: float) -> Any:
@@ -287,7 +285,7 @@ class Marcher:
 
     # ---- per size ----
     def _target(self, size: tuple[int, int]) -> dict[str, Any]:
-        from .util import cached_targets
+        from tetvr.gl.util import cached_targets
 
         return cached_targets(self.ctx, self._targets, size, self._make_target)
 
@@ -326,6 +324,8 @@ class Marcher:
     def _frame(self, mesh: TetMesh, camera: Camera, size: tuple[int, int], uniforms: dict[str, Any],
                table_uniforms: dict[str, Any], defines: dict[str, int], clock: Any, window: Any = None
                ) -> NDArray[np.float32]:
+        """One frame: the first layer's entries, then march passes, each followed by a peel
+        pass where rays go on without an entry list; the last march pass's colour read back."""
         import moderngl
 
         ctx = self.ctx
@@ -342,13 +342,56 @@ class Marcher:
         for unit, tex in self._textures.items():
             tex.bind_to_image(unit, read=True, write=False)
         ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
+        listed, rim, n_near_cells = self._first_entries(t, mesh, rec, camera, size, common, perspective,
+                                                        bool(defines.get("EXTENT")))
+        clock.lap("entry")
 
-        # Layer 1: boundary faces and the cells the near plane cuts. The first march pass's
-        # targets keep what a pixel no ray enters shows (its state: done), since the pass
-        # runs only where the entry pass leaves a depth below 1.
+        march_defines = dict(defines, **self._shifts, PERSPECTIVE=perspective, CELL_DATA=int(mesh.cell_data),
+                             **(window.defines if window is not None else {}))
+        samplers = dict(u_entry=4, u_color_in=5, u_state_in=6, u_last_in=7, u_state=5, u_last=7)
+        steps = dict(u_max_steps=int(min(mesh.n_tets + 1, 1 << 30)), u_opaque=1.0 - OPAQUE_REMAINDER)
+        march_uniforms = {**common, **table_uniforms, **samplers, **steps}
+        src, dst = "b", "a"
+        layers, exhausted = 0, False
+        for layer in range(MAX_LAYERS):
+            self._march_pass(t, src, dst, layer, listed, march_defines, march_uniforms, window, perspective)
+            layers += 1
+            src, dst = dst, src
+            clock.lap("march")
+            if rec.convex:
+                break  # a ray that leaves a convex mesh does not enter it again: no peel
+            if listed:  # the march picked the next entries: another pass if any ray has one
+                ctx.memory_barrier()
+                if self._counters[1].read() == b"\0" * 4:
+                    break
+                continue
+            self._peel(t, src, rim, perspective, common, samplers)
+            clock.lap("entry")
+            if self._query.samples == 0:
+                break
+        else:
+            exhausted = True
+        if rim is not None:
+            rim.release()
+        self.last_stats = MarchStats(layers=layers, layers_exhausted=exhausted, entry_list=listed,
+                                     n_near_cells=n_near_cells, n_rim_faces=rim.n_faces if rim is not None else 0)
+        raw = t[f"color_{src}"].read()
+        clock.lap("readback")
+        return np.frombuffer(raw, dtype=np.float32).reshape(size[1], size[0], 4)[::-1].copy()
+
+    def _first_entries(self, t: dict[str, Any], mesh: TetMesh, rec: MarchRecords, camera: Camera,
+                       size: tuple[int, int], common: dict[str, Any], perspective: int, extent: bool
+                       ) -> tuple[bool, _Rim | None, int]:
+        """Layer 1's entry pass: boundary faces and the cells the near plane cuts. Returns
+        whether the march passes read an entry list, this view's rim faces and the number
+        of cells the near plane cut."""
+        import moderngl
+
+        ctx = self.ctx
+        # The first march pass's targets keep what a pixel no ray enters shows (its state:
+        # done), since the pass runs only where the entry pass leaves a depth below 1.
         near_ids, rects = near_plane_cells(mesh, camera, size[0] / size[1])
-        t["fbo_a"].clear(*((3.0e38, -3.0e38, 0.0, 0.0) if defines.get("EXTENT") else (0.0, 0.0, 0.0, 0.0)),
-                         depth=1.0)
+        t["fbo_a"].clear(*((3.0e38, -3.0e38, 0.0, 0.0) if extent else (0.0, 0.0, 0.0, 0.0)), depth=1.0)
         t["entry_fbo"].use()
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.depth_func = "<"
@@ -377,83 +420,67 @@ class Marcher:
             self._counters[1].bind_to_storage_buffer(MORE_BUFFER)
             t["count"].bind_to_image(COUNT_IMAGE, read=True, write=False)
             t["list"].bind_to_image(LIST_IMAGE, read=True, write=False)
-        clock.lap("entry")
+        return listed, rim, int(near_ids.size)
 
-        march_defines = dict(defines, **self._shifts, PERSPECTIVE=perspective, CELL_DATA=int(mesh.cell_data),
-                             **(window.defines if window is not None else {}))
-        samplers = dict(u_entry=4, u_color_in=5, u_state_in=6, u_last_in=7, u_state=5, u_last=7)
-        steps = dict(u_max_steps=int(min(mesh.n_tets + 1, 1 << 30)), u_opaque=1.0 - OPAQUE_REMAINDER)
-        src, dst = "b", "a"
-        layers, exhausted = 0, False
-        for layer in range(MAX_LAYERS):
-            march = self.owner._program("march", **march_defines, FIRST=int(layer == 0), LIST=int(listed),
-                                        LIST_LENGTH=LIST_LENGTH, AT_FAR=1)
-            self._set(march, {**common, **table_uniforms, **samplers, **steps})
-            if listed:
-                self._counters[1].write(b"\0" * 4)
-            if window is not None:
-                window.bind(march)
-            t["entry"].use(4)
-            t[f"color_{src}"].use(5)
-            t[f"state_{src}"].use(6)
-            t[f"last_{src}"].use(7)
-            t[f"fbo_{dst}"].use()
-            # Only where a ray enters: the first layer's entry depths (below 1), or the rays
-            # the mark pass found going on; the depth test runs before the shader.
-            chosen = layer == 0 or listed
-            if chosen and layer > 0:
-                self._mark(t, dst, perspective)
-            if chosen:
-                ctx.enable(moderngl.DEPTH_TEST)
-                ctx.depth_func = ">"
-                t[f"fbo_{dst}"].depth_mask = False
-            self._fullscreen(march)
-            if chosen:
-                ctx.disable(moderngl.DEPTH_TEST)
-                t[f"fbo_{dst}"].depth_mask = True
-            layers += 1
-            src, dst = dst, src
-            clock.lap("march")
-            if rec.convex:
-                break  # a ray that leaves a convex mesh does not enter it again: no peel
-            if listed:  # the march picked the next entries: another pass if any ray has one
-                ctx.memory_barrier()
-                if self._counters[1].read() == b"\0" * 4:
-                    break
-                continue
-            # Peel: the next entry behind where each ray left the mesh, if any ray did.
-            peel = self._entry_program(perspective, peel=1)
-            self._set(peel, {**common, **samplers})
-            t[f"state_{src}"].use(5)
-            t[f"last_{src}"].use(7)
-            t["entry_fbo"].use()
-            t["entry_fbo"].clear(depth=1.0)
-            self._clear_entries(t)  # this march runs on every pixel (march.frag reads NO_ENTRY)
-            ctx.enable(moderngl.DEPTH_TEST)
-            ctx.depth_func = "<"
-            if self._query is None:
-                self._query = ctx.query(samples=True)
-            with self._query:
-                self._draw_faces(peel, rim)
-                self._draw_rim(rim, perspective, 1, common, samplers)
-            ctx.disable(moderngl.DEPTH_TEST)
-            clock.lap("entry")
-            if self._query.samples == 0:
-                break
-        else:
-            exhausted = True
-        if rim is not None:
-            rim.release()
-        self.last_stats = MarchStats(layers=layers, layers_exhausted=exhausted, entry_list=listed,
-                                     n_near_cells=int(near_ids.size),
-                                     n_rim_faces=rim.n_faces if rim is not None else 0)
-        raw = t[f"color_{src}"].read()
-        clock.lap("readback")
-        return np.frombuffer(raw, dtype=np.float32).reshape(size[1], size[0], 4)[::-1].copy()
+    def _march_pass(self, t: dict[str, Any], src: str, dst: str, layer: int, listed: bool,
+                    march_defines: dict[str, int], march_uniforms: dict[str, Any], window: Any,
+                    perspective: int) -> None:
+        """One full-screen march pass (march.frag) from set ``src``'s targets into ``dst``'s,
+        run only where a ray enters (the depth test before the shader)."""
+        import moderngl
+
+        march = self.owner._program("march", **march_defines, FIRST=int(layer == 0), LIST=int(listed),
+                                    LIST_LENGTH=LIST_LENGTH, AT_FAR=1)
+        self._set(march, march_uniforms)
+        if listed:
+            self._counters[1].write(b"\0" * 4)
+        if window is not None:
+            window.bind(march)
+        t["entry"].use(4)
+        t[f"color_{src}"].use(5)
+        t[f"state_{src}"].use(6)
+        t[f"last_{src}"].use(7)
+        t[f"fbo_{dst}"].use()
+        # Only where a ray enters: the first layer's entry depths (below 1), or the rays
+        # the mark pass found going on; the depth test runs before the shader.
+        chosen = layer == 0 or listed
+        if chosen and layer > 0:
+            self._mark(t, dst, perspective)
+        if chosen:
+            self.ctx.enable(moderngl.DEPTH_TEST)
+            self.ctx.depth_func = ">"
+            t[f"fbo_{dst}"].depth_mask = False
+        self._fullscreen(march)
+        if chosen:
+            self.ctx.disable(moderngl.DEPTH_TEST)
+            t[f"fbo_{dst}"].depth_mask = True
+
+    def _peel(self, t: dict[str, Any], src: str, rim: _Rim | None, perspective: int, common: dict[str, Any],
+              samplers: dict[str, Any]) -> None:
+        """Peel: the next entry behind where each ray of set ``src`` left the mesh, if any
+        ray did; the occlusion query counts the samples (none: no ray enters again)."""
+        import moderngl
+
+        ctx = self.ctx
+        peel = self._entry_program(perspective, peel=1)
+        self._set(peel, {**common, **samplers})
+        t[f"state_{src}"].use(5)
+        t[f"last_{src}"].use(7)
+        t["entry_fbo"].use()
+        t["entry_fbo"].clear(depth=1.0)
+        self._clear_entries(t)  # this march runs on every pixel (march.frag reads NO_ENTRY)
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.depth_func = "<"
+        if self._query is None:
+            self._query = ctx.query(samples=True)
+        with self._query:
+            self._draw_faces(peel, rim)
+            self._draw_rim(rim, perspective, 1, common, samplers)
+        ctx.disable(moderngl.DEPTH_TEST)
 
     def _rim_buffers(self, mesh: TetMesh, rec: MarchRecords, camera: Camera,
                      size: tuple[int, int]) -> _Rim | None:
-        """This view's :func:`~tetvr.marching.rim_faces` on the GL, or None without any."""
+        """This view's :func:`~tetvr.mesh.records.rim_faces` on the GL, or None without any."""
         idx, rects, exclusive = rim_faces(rec, camera, size)
         if idx.size == 0:
             return None
@@ -531,7 +558,7 @@ class Marcher:
         return True
 
     def _set(self, prog: Any, uniforms: dict[str, Any]) -> None:
-        from .util import set_uniforms
+        from tetvr.gl.util import set_uniforms
 
         set_uniforms(prog, **uniforms)
 

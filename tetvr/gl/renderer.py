@@ -7,7 +7,7 @@ classifies the cells in drawing order and writes each one's finished fan vertice
 vertex buffer; one draw call per batch passes them through (``tet.vert``) to fragments that
 look up the table (``tet.frag``) and blend back to front into an RGBA32F target, which is
 read back. Tet marching (``method="raymarch"``, the default through ``"auto"``) is
-:mod:`tetvr.gl.raymarch` on the same context and table; :func:`tetvr.method.choose` picks.
+:mod:`tetvr.gl.raymarch` on the same context and table; :func:`tetvr.order.method.choose` picks.
 """
 
 from __future__ import annotations
@@ -18,50 +18,34 @@ from typing import Any, Callable, Iterator
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import Camera
-from ..clip import Clip, check_clip
-from ..mesh import TetMesh
-from ..preintegrate import PreintegrationTable, table_for
-from ..tablesize import resolve as resolve_table_size, segment_sample
-from ..precision import check_view_precision
-from ..render import check_float32_range
-from ..settings import RenderSettings
-from ..cull import gpu_scalar_margin, visible_cells
-from ..sort import sort_with_stats
-from ..transfer import TransferFunction
-from .context import create_context, describe
-from .shaders import ShaderCompileError, assemble, explain
-from ..method import choose
-from .raymarch import Marcher, raymarch_capacity
-from .vtkpt import VTKParity, vtk_depth_order
-from .surfaces import RayWindow, SurfacePass
-from ..surface import Surface, check_surfaces
-from .util import (Clock, GLOwner, check_size, clear_gl_errors, gl_locked, locked, make_target, set_uniforms,
+from tetvr.core.camera import Camera
+from tetvr.core.clip import Clip, check_clip
+from tetvr.mesh.tetmesh import TetMesh
+from tetvr.optics.preintegrate import table_for
+from tetvr.optics.table import PreintegrationTable
+from tetvr.optics.tablesize import resolve as resolve_table_size, segment_sample
+from tetvr.order.precision import check_view_precision
+from tetvr.order.precision import check_float32_range
+from tetvr.settings import RenderSettings
+from tetvr.order.cull import gpu_scalar_margin, visible_cells
+from tetvr.order.sort import sort_with_stats
+from tetvr.optics.transfer import TransferFunction
+from tetvr.gl.context import create_context, describe
+from tetvr.gl.shaders import ShaderCompileError, assemble, explain
+from tetvr.order.method import choose
+from tetvr.gl.projected import ProjectedCells
+from tetvr.gl.raymarch import Marcher, raymarch_capacity
+from tetvr.gl.vtkpt import VTKParity, vtk_depth_order
+from tetvr.gl.surfaces import RayWindow, SurfacePass
+from tetvr.core.surface import Surface, check_surfaces
+from tetvr.gl.util import (Clock, GLOwner, check_size, clear_gl_errors, gl_locked, locked, make_target, set_uniforms,
                    table_texture, tf_points_texture)
 
 __all__ = ["Renderer", "FrameStats"]
 
-#: Bytes per tet that size the largest chunk against one storage-buffer binding: the tets
-#: buffer needs 16 (the fan vertices are bound in ranges), with room for the per-tet data a
-#: shader may bind whole; on llvmpipe's 128 MiB binding this caps chunks at 2.8M tets.
-_CHUNK_BYTES_PER_TET = 48
 #: Texture unit of the transfer function's points (integration="exact"); 0-9 are taken
 #: (the table, the ray caster's records and targets, the warp, the ray limit).
 TF_POINTS_UNIT = 10
-#: One fan vertex as classify.comp writes it (common.glsl's FanVertex): uvec4(ndc.xy, exact
-#: tet, 0), then the segment; 5 per tet. The attributes of tet.vert: (name, class, format, offset).
-_FAN_VERTEX_BYTES = 32
-_FAN_ATTRIBUTES = (("in_ndc", "f", "2f", 0), ("in_exact", "i", "1i", 8), ("in_chord", "f", "1f", 12),
-                   ("in_segment", "f", "4f", 16))
-_GROUP = 64  # classify.comp local size
-_MAX_GROUPS = 65535
-#: Most tets per draw call; the index buffer holds at most this many fan patterns (3 MiB).
-_DRAW_BATCH = 65_536
-#: tet.vert's fan of one tet: 4 triangles over its 5 vertices (0 the thick vertex).
-_FAN_PATTERN = np.array([0, 1, 2, 0, 2, 3, 0, 3, 4, 0, 4, 1], dtype=np.uint32)
-#: Tets per chunk: 96 MB of fan vertices (160 B a tet), which keeps host memory bounded for
-#: meshes of millions of tets (bench/memory.py) on llvmpipe, whose buffers live there.
-_DEFAULT_CHUNK = 600_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,7 +80,7 @@ class Renderer(GLOwner):
     ----------
     settings : method settings (table size, sort, interpolation).
     profile : wait for the GPU after each stage so :attr:`last_stats` holds stage times.
-    chunk_tets : the most tets drawn at once (default 2M, capped by the GL's storage
+    chunk_tets : the most tets drawn at once (default 600,000, capped by the GL's storage
         buffer size); larger meshes are classified and drawn in sorted chunks.
 
     One renderer holds one GL context. It may be shared by threads: each call takes the
@@ -125,44 +109,27 @@ class Renderer(GLOwner):
         self.settings = settings
         self.profile = bool(profile)
         self.ctx: Any = create_context()
-        # One storage buffer must hold a chunk's fans (48 B/tet); meshes beyond it are drawn
-        # in sorted chunks, each classified and drawn in turn.
-        self._max_ssbo = int(self.ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE", 1 << 27))
-        limit = self._max_ssbo // _CHUNK_BYTES_PER_TET
-        self.chunk_tets = min(chunk_tets or _DEFAULT_CHUNK, limit)
-        self._chunked = False
         self.gl_info = describe(self.ctx)
         self._programs: dict[tuple[str, ...], Any] = {}
-        self._mesh: TetMesh | None = None
-        self._mesh_buffers: list[Any] = []
-        self._centre = np.zeros(3)
-        self._gpu_tets: NDArray[np.int32] | None = None  # the tets buffer's cells (cell data: unshared points)
-        self._fans: Any = None
-        self._order: Any = None
+        self._cells = ProjectedCells(self, chunk_tets)  # projected tetrahedra's buffers (no GL object yet)
         self._marcher: Marcher | None = None  # the tet-marching ray caster's GL state, made on first use
         self._parity: VTKParity | None = None  # VTK parity's GL state (optics="vtk"), made on first use
         self._surfaces: SurfacePass | None = None  # the opaque surfaces' GL state, made on first use
-        self._exact_count: Any = None  # classify.comp's count of fans on the exact path
-        self._fan_indices: Any = None  # index buffer of fan patterns (_reserve_fans), made on first draw
         self._table: PreintegrationTable | None = None  # the table in the texture
         self._table_cache: tuple[tuple[Any, ...], PreintegrationTable] | None = None  # table()'s last (key, table)
         self._table_tex: Any = None
         self._tf_points: tuple[TransferFunction, Any] | None = None  # integration="exact": (tf, its points)
         self._targets: dict[tuple[tuple[int, int], int, str], Any] = {}
         self._clock = Clock(self.ctx, False)
-        self._vaos: dict[int, Any] = {}
         self.last_stats = FrameStats()
         self._released = False
 
     # ---- lifetime (GLOwner: release(), the context manager) ----
     def _forget(self) -> None:
         self._programs.clear()
-        self._vaos.clear()
-        self._mesh_buffers = []
+        self._cells.forget()
         self._targets.clear()
-        self._fans = self._order = self._table_tex = self._fan_indices = self._exact_count = None
-        self._tf_points = None
-        self._mesh = self._gpu_tets = None
+        self._table_tex = self._tf_points = None
         self._table = self._table_cache = None
         if self._marcher is not None:
             self._marcher.forget()
@@ -172,7 +139,7 @@ class Renderer(GLOwner):
             self._surfaces.forget()
 
     def _gl_objects(self) -> list[Any]:
-        objs = [*self._vaos.values(), *self._programs.values(), *self._mesh_buffers]
+        objs = [*self._cells.gl_objects(), *self._programs.values()]
         if self._marcher is not None:
             objs += self._marcher.gl_objects()
         if self._parity is not None:
@@ -181,8 +148,8 @@ class Renderer(GLOwner):
             objs += self._surfaces.gl_objects()
         if self._tf_points is not None:
             objs.append(self._tf_points[1])
-        objs += [o for o in (self._fans, self._order, self._table_tex, self._fan_indices, self._exact_count)
-                 if o is not None]
+        if self._table_tex is not None:
+            objs.append(self._table_tex)
         for fbo in self._targets.values():
             objs += [fbo, *fbo.color_attachments]
         return objs
@@ -190,7 +157,7 @@ class Renderer(GLOwner):
     @locked
     def gpu_bytes(self) -> int:
         """Bytes of GPU memory held in this renderer's buffers, table and targets."""
-        total = sum(b.size for b in [*self._mesh_buffers, self._fans, self._order, self._fan_indices] if b is not None)
+        total = self._cells.gpu_bytes()
         if self._table is not None:
             total += self._table.data.nbytes
         for (size, components, dtype) in self._targets:
@@ -243,72 +210,14 @@ class Renderer(GLOwner):
         return prog
 
     # ---- per-mesh, per-table, per-size state ----
-    def _use_mesh(self, mesh: TetMesh) -> None:
-        """Upload the mesh once. Meshes larger than one draw allows keep only their points
-        on the GPU; their cells then travel per frame in sorted chunks (:meth:`_chunks`)."""
-        if mesh is self._mesh:
-            return
-        for b in [*self._mesh_buffers, self._fans, self._order]:
-            if b is not None:
-                b.release()
-        # Coordinates relative to the mesh centre keep float32 precise far from the origin.
-        self._centre = mesh.float32_origin
-        if mesh.cell_scalars is None:
-            pts = np.empty((mesh.n_points, 4), dtype=np.float32)
-            pts[:, :3] = mesh.points - self._centre
-            pts[:, 3] = mesh.scalars
-            self._gpu_tets = mesh.tets
-        else:
-            # Cell data: every tet gets its own four points carrying its value, so the
-            # shaders, which read a scalar per vertex, see the field constant in each tet.
-            pts = np.empty((mesh.n_tets, 4, 4), dtype=np.float32)
-            pts[..., :3] = mesh.points[mesh.tets] - self._centre
-            pts[..., 3] = mesh.cell_scalars[:, None]
-            pts = pts.reshape(-1, 4)
-            self._gpu_tets = np.arange(4 * mesh.n_tets, dtype=np.int32).reshape(-1, 4)
-        if pts.nbytes > self._max_ssbo:
-            raise MemoryError(f"the mesh needs {pts.shape[0]} points on the GPU ({pts.nbytes >> 20} MiB); this GL "
-                              f"allows {self._max_ssbo >> 20} MiB in one storage buffer")
-        chunk = min(mesh.n_tets, self.chunk_tets)
-        self._chunked = chunk < mesh.n_tets
-        points = self.ctx.buffer(pts.tobytes())
-        if self._chunked:
-            tets = self.ctx.buffer(reserve=chunk * 16)
-        else:
-            tets = self.ctx.buffer(np.ascontiguousarray(self._gpu_tets, dtype=np.int32).tobytes())
-        self._mesh_buffers = [points, tets]
-        # Written by classify.comp, read as vertex attributes: 5 finished vertices per tet.
-        self._fans = self.ctx.buffer(reserve=max(chunk, 1) * 5 * _FAN_VERTEX_BYTES)
-        self._order = self.ctx.buffer(reserve=max(chunk, 1) * 4)
-        if self._chunked:
-            self._order.write(np.arange(chunk, dtype=np.uint32).tobytes())
-        self._mesh = mesh
+    @property
+    def chunk_tets(self) -> int:
+        """The most tets classified and drawn at once; larger meshes are drawn in sorted chunks."""
+        return self._cells.chunk_tets
 
     def _chunks(self, mesh: TetMesh, order: NDArray[np.uint32]) -> Iterator[int]:
-        """Make each chunk of the drawing order current in turn; yields the number of
-        cells to classify and draw, which classify.comp finds through the order buffer.
-
-        Unchunked meshes are one chunk: the order buffer holds the order (which may list a
-        subset: the cells left after culling, or an explicit order). Chunked meshes get the
-        cells of each chunk uploaded in drawing order, with an identity order.
-        """
-        if not self._chunked:
-            self._order.write(np.ascontiguousarray(order, dtype=np.uint32).tobytes())
-            self._clock.lap("order_upload")
-            yield int(order.shape[0])
-            return
-        for first in range(0, int(order.shape[0]), self.chunk_tets):
-            ids = order[first:first + self.chunk_tets]
-            if first:
-                # llvmpipe shades fragments when the scene is flushed, not at the draw, and
-                # does not flush for a write to a storage buffer that a fragment shader reads
-                # (tet.frag's exact segments read the tets buffer): without this wait the
-                # previous chunk's near-plane fragments read this chunk's cells.
-                self.ctx.finish()
-            assert self._gpu_tets is not None  # set with the mesh's buffers
-            self._mesh_buffers[1].write(np.ascontiguousarray(self._gpu_tets[ids], dtype=np.int32).tobytes())
-            self._clock.lap("order_upload")
-            yield int(ids.shape[0])
+        """Make each chunk of ``mesh``'s drawing order current in turn (:meth:`ProjectedCells.chunks`)."""
+        return self._cells.chunks(order, self._clock)
 
     def _use_table(self, table: PreintegrationTable) -> None:
         if table is self._table:
@@ -361,10 +270,10 @@ class Renderer(GLOwner):
 
     def _view_uniforms(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> dict[str, Any]:
         """Upload the mesh if new; the uniforms of this view."""
-        self._use_mesh(mesh)
+        self._cells.use_mesh(mesh)
         self._clock.lap("upload")
         view = camera.view_matrix()
-        view[:3, 3] += view[:3, :3] @ self._centre  # the buffers hold points minus the centre
+        view[:3, 3] += view[:3, :3] @ self._cells.centre  # the buffers hold points minus the centre
         near, far = camera.clipping_range
         proj = camera.projection_matrix(size[0] / size[1])
         return dict(u_view=view, u_proj=proj, u_perspective=0 if camera.parallel_projection else 1,
@@ -373,75 +282,13 @@ class Renderer(GLOwner):
 
     def _classify(self, n_tets: int, uniforms: dict[str, Any], *, perspective_correct: int,
                   count_exact: bool = False, program: Any = None) -> int:
-        """Run classify.comp (or ``program``, which writes the same fans) over the first
-        ``n_tets`` drawing positions of the order buffer: it writes their fans' vertices in
-        drawing order. With ``count_exact``, return how many fans take the exact
-        per-fragment path (a 4-byte read that waits for the classification), else 1.
-        ``uniforms`` holds the view's and, for the render, the table's (the vertices carry
-        table coordinates)."""
-        classify = program or self._program("classify", PERSPECTIVE_CORRECT=perspective_correct)
-        set_uniforms(classify, u_count=n_tets, **uniforms)
-        if self._exact_count is None:
-            self._exact_count = self.ctx.buffer(reserve=4)
-        self._exact_count.write(b"\0\0\0\0")
-        self._mesh_buffers[0].bind_to_storage_buffer(0)
-        self._mesh_buffers[1].bind_to_storage_buffer(1)
-        self._order.bind_to_storage_buffer(3)
-        self._exact_count.bind_to_storage_buffer(4)
-        # A chunk's fan vertices (160 B/tet) may exceed one storage-buffer binding: bind them
-        # in ranges. A whole number of groups per range keeps each offset a multiple of
-        # 64 * 160 B, which meets any GL's offset alignment.
-        per_tet = 5 * _FAN_VERTEX_BYTES
-        step = min(_MAX_GROUPS, max(self._max_ssbo // (per_tet * _GROUP), 1)) * _GROUP
-        for first in range(0, n_tets, step):
-            count = min(step, n_tets - first)
-            self._fans.bind_to_storage_buffer(2, offset=first * per_tet, size=count * per_tet)
-            set_uniforms(classify, u_offset=first)
-            classify.run((count + _GROUP - 1) // _GROUP)
-        n_exact = 1
-        if count_exact:
-            self.ctx.memory_barrier()
-            n_exact = int(np.frombuffer(self._exact_count.read(), dtype=np.uint32)[0])
-        self._clock.lap("classify")
-        return n_exact
+        """Classify the first ``n_tets`` cells of the current chunk (:meth:`ProjectedCells.classify`)."""
+        return self._cells.classify(n_tets, uniforms, self._clock, perspective_correct=perspective_correct,
+                                    count_exact=count_exact, program=program)
 
     def _draw(self, prog: Any, fbo: Any, n_tets: int, blend: tuple[Any, ...]) -> None:
-        import moderngl
-
-        fbo.use()
-        # The exact per-fragment path reads the mesh (tet.frag, depth.frag).
-        self._mesh_buffers[0].bind_to_storage_buffer(0)
-        self._mesh_buffers[1].bind_to_storage_buffer(1)
-        self.ctx.memory_barrier()  # classify.comp's vertices -> the vertex fetch
-        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
-        self.ctx.enable(moderngl.BLEND)
-        self.ctx.blend_func, self.ctx.blend_equation = blend
-        self._reserve_fans(min(n_tets, _DRAW_BATCH))
-        vao = self._vaos.get(id(prog))
-        if vao is None:
-            vao = self._vaos[id(prog)] = self.ctx.vertex_array(prog, [], index_buffer=self._fan_indices,
-                                                               index_element_size=4)
-        attributes = [(prog[name].location, cls, fmt, offset) for name, cls, fmt, offset in _FAN_ATTRIBUTES
-                      if name in prog]  # the floor shader reads no segment
-        for first in range(0, n_tets, _DRAW_BATCH):
-            # The index pattern counts from 0: each batch points the attributes at its first tet.
-            base = first * 5 * _FAN_VERTEX_BYTES
-            for location, cls, fmt, offset in attributes:
-                vao.bind(location, cls, self._fans, fmt, offset=base + offset, stride=_FAN_VERTEX_BYTES)
-            vao.render(moderngl.TRIANGLES, vertices=12 * min(_DRAW_BATCH, n_tets - first))
-        self.ctx.disable(moderngl.BLEND)
-        self._clock.lap("draw")
-
-    def _reserve_fans(self, n_tets: int) -> None:
-        """Make the index buffer hold the fan pattern of at least ``n_tets`` tets (the
-        vertex arrays that use it are remade with it)."""
-        if self._fan_indices is not None and self._fan_indices.size >= n_tets * _FAN_PATTERN.nbytes:
-            return
-        for obj in [*self._vaos.values(), *([self._fan_indices] if self._fan_indices is not None else [])]:
-            obj.release()
-        self._vaos.clear()
-        first = np.arange(max(n_tets, 1), dtype=np.uint32)[:, None] * 5
-        self._fan_indices = self.ctx.buffer((first + _FAN_PATTERN).tobytes())
+        """Draw the first ``n_tets`` classified fans into ``fbo`` (:meth:`ProjectedCells.draw`)."""
+        self._cells.draw(prog, fbo, n_tets, blend, self._clock)
 
     def _read(self, fbo: Any, size: tuple[int, int], components: int, dtype: str = "f4") -> NDArray[np.float32]:
         raw = fbo.read(components=components, dtype=dtype)
@@ -620,7 +467,7 @@ class Renderer(GLOwner):
 
     def _uses_raymarch(self, mesh: TetMesh, camera: Camera | None = None, size: tuple[int, int] | None = None) -> bool:
         """Whether frames of this mesh go to the tet-marching ray caster: what
-        :func:`tetvr.method.choose` says, unless the records would not fit one texture of
+        :func:`tetvr.order.method.choose` says, unless the records would not fit one texture of
         this GL (then projected tetrahedra, which draw in chunks)."""
         if self._marcher is not None:
             self._marcher.settle(mesh, keep=True)  # the adjacency choose() reads, built in the background

@@ -1,27 +1,25 @@
 """The opaque surfaces' GL pass and the ray window both tet methods cut their rays to.
 
 Owned by a :class:`~tetvr.gl.renderer.Renderer`. Per frame with surfaces, one draw
-(``shaders/surface.*``, :mod:`tetvr.surface` for the technique) leaves, per pixel, the
+(``shaders/surface.*``, :mod:`tetvr.core.surface` for the technique) leaves, per pixel, the
 nearest hit's shaded colour and eye depth; the depth becomes the far end of each ray's
 window (``shaders/window.glsl``, bound at :data:`LIMIT_UNIT`), and the colour is
-composited behind the tets' image. Clip planes (:class:`tetvr.clip.Clip`) go to the
+composited behind the tets' image. Clip planes (:class:`tetvr.core.clip.Clip`) go to the
 same window as eye-space uniforms.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import Camera
-from ..clip import Clip
-from ..surface import Surface
-
-if TYPE_CHECKING:
-    from .renderer import Renderer
+from tetvr.core.camera import Camera
+from tetvr.core.clip import Clip
+from tetvr.core.surface import Surface
+from tetvr.gl.host import ProgramHost
 
 __all__ = ["LIMIT_UNIT", "RayWindow", "SurfacePass"]
 
@@ -67,7 +65,7 @@ class RayWindow:
 class SurfacePass:
     """GL state of the opaque surfaces for one :class:`Renderer`."""
 
-    def __init__(self, owner: "Renderer") -> None:
+    def __init__(self, owner: ProgramHost) -> None:
         self.owner = owner
         self.ctx = owner.ctx
         self._key: tuple[Any, ...] | None = None
@@ -121,7 +119,7 @@ class SurfacePass:
         self._key = key
 
     def _target(self, size: tuple[int, int]) -> dict[str, Any]:
-        from .util import cached_targets
+        from tetvr.gl.util import cached_targets
 
         return cached_targets(self.ctx, self._targets, size, self._make_target)
 
@@ -146,7 +144,7 @@ class SurfacePass:
         near, far = camera.clipping_range
         proj = camera.projection_matrix(size[0] / size[1])
         prog = self.owner._program("surface", PERSPECTIVE=int(not camera.parallel_projection))
-        from .util import set_uniforms
+        from tetvr.gl.util import set_uniforms
 
         set_uniforms(prog, u_view=view, u_proj=proj, u_viewport=(float(size[0]), float(size[1])), u_near=near,
                      u_far=far, u_ray_scale=(1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1])))

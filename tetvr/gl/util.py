@@ -11,11 +11,11 @@ from typing import TYPE_CHECKING, Any, Callable, Concatenate, Iterator, ParamSpe
 
 import numpy as np
 
-from ..image import _gib, check_memory, image_size
-from .context import ForkedProcessError, check_not_forked, context_alive, context_lock, current_in_thread
+from tetvr.core.image import _gib, check_memory, image_size
+from tetvr.gl.context import ForkedProcessError, check_not_forked, context_alive, context_lock, current_in_thread
 
 if TYPE_CHECKING:
-    from ..preintegrate import PreintegrationTable
+    from tetvr.optics.table import PreintegrationTable
 
 __all__ = ["GLOwner", "gl_locked", "locked", "check_size", "clear_gl_errors", "free_video_memory", "make_target", "set_uniforms",
            "table_texture", "Clock"]
@@ -258,7 +258,7 @@ def make_target(ctx: Any, size: tuple[int, int], components: int, dtype: str) ->
 
 
 def table_texture(ctx: Any, table: "PreintegrationTable") -> Any:
-    """A 3D texture of a :class:`~tetvr.preintegrate.PreintegrationTable` for
+    """A 3D texture of a :class:`~tetvr.optics.table.PreintegrationTable` for
     ``shaders/lookup.glsl``: linear filtering, clamped to the edge texels.
 
     Texel (slice, front, back): the thickness slice varies fastest, so the 8 texels of one
@@ -284,7 +284,7 @@ def table_texture(ctx: Any, table: "PreintegrationTable") -> Any:
 
 
 class WarpedTableTexture:
-    """The textures of a warped table (:mod:`tetvr.tablewarp`), used and released as one:
+    """The textures of a warped table (:mod:`tetvr.optics.tablewarp`), used and released as one:
     ``use(unit)`` binds the table there and the warp at :data:`WARP_UNIT` (``u_warp``)."""
 
     def __init__(self, table: Any, warp: Any) -> None:

@@ -7,7 +7,7 @@ tetrahedra with Wylie et al.'s (2002) thick vertex found where two opposite edge
 projection. Parity mode exists to show ParaView's picture, defects included, so it takes
 VTK's steps rather than tetvr's own (docs/paraview.md, "What VTK's Projected tetra
 computes"): colour and opacity classified at the vertices and kept in 8 bits by
-truncation (:func:`tetvr.optics.vtk_vertex_rgba8`), the thick vertex's values averaged
+truncation (:func:`tetvr.optics.model.vtk_vertex_rgba8`), the thick vertex's values averaged
 (and truncated again), the class-2 opacity taken with the wrong edge parameter, the
 thickness in perspective views read from a 2,048-entry square-root table, everything
 interpolated linearly in screen space, and ``alpha = 1 - exp(-a d / u)`` per fragment
@@ -19,18 +19,16 @@ optics; the pre-integration table is not built.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import Camera
-from ..mesh import TetMesh
-from ..optics import vtk_vertex_rgba8
-from ..transfer import TransferFunction
-
-if TYPE_CHECKING:
-    from .renderer import Renderer
+from tetvr.core.camera import Camera
+from tetvr.mesh.tetmesh import TetMesh
+from tetvr.optics.model import vtk_vertex_rgba8
+from tetvr.optics.transfer import TransferFunction
+from tetvr.gl.host import DrawHost
 
 __all__ = ["VTKParity", "vtk_depth_order", "SQRT_TABLE_SIZE"]
 
@@ -54,7 +52,7 @@ class VTKParity:
     """The parity renderer's GL state for one :class:`~tetvr.gl.renderer.Renderer`: the
     vertices' 8-bit colours, uploaded once per mesh and transfer function."""
 
-    def __init__(self, owner: "Renderer") -> None:
+    def __init__(self, owner: DrawHost) -> None:
         self.owner = owner
         self._colors: tuple[TetMesh, TransferFunction, Any] | None = None
 

@@ -1,0 +1,395 @@
+"""The command line's commands: ``render``, ``demo``, ``fusion-demo``, ``compare``, ``info``,
+``view`` and ``animate``, each a function of the parsed arguments that returns the exit
+status (:data:`_COMMANDS` maps the names to them). Heavy and optional packages are
+imported by the command that needs them, so ``tetvr --help`` stays quick."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from tetvr.apps.cli.errors import EXIT_OK
+from tetvr.apps.cli.outputs import (_check_writable, _npy_path, _refuse_overwrite, _refuse_overwrite_in, _scene_inputs,
+                                    _series_inputs, _step_name)
+
+#: Nothing public: :func:`tetvr.apps.cli.main` runs these.
+__all__: list[str] = []
+
+
+def _is_scene(path: str) -> bool:
+    """A scene JSON file (by its name, or a JSON object by any name) or a ParaView state
+    (``.pvsm``, read by :func:`tetvr.scene.paraview.load_state`), else a mesh file."""
+    if path.lower().endswith((".json", ".pvsm")):
+        return True
+    if not os.path.isfile(path):  # never open a FIFO (it would block) or a device: the reader says what it is
+        return False
+    try:
+        with open(path, "rb") as f:
+            head = f.read(256).lstrip()
+    except OSError:
+        return False  # the mesh reader says what is wrong with it
+    return head[:1] == b"{"
+
+
+def _write_picture(image: Any, out: str, *, tf: Any, mesh: Any, camera: Any, background: Any,
+                   annotate: bool, title: str | None, units: str | None) -> str:
+    """The PNG: annotated (legend, triad, outline) unless asked not to or matplotlib is
+    missing (then the plain image, with a note); returns what was written."""
+    from tetvr.core.image import atomic_output, png_bytes
+
+    data = None
+    if annotate:
+        try:
+            from tetvr.apps.annotate import annotate as annotate_png
+
+            data = annotate_png(image, tf, field=mesh.scalar_name, units=units, title=title, camera=camera,
+                                bounds=mesh.bounds, background=background)
+        except ImportError:
+            print("tetvr: note: the picture has no legend: matplotlib is not installed (pip install 'tetvr[plot]')",
+                  file=sys.stderr)
+    what = "annotated PNG" if data is not None else "PNG"
+    if data is None:
+        data = png_bytes(image, background=background)
+    with atomic_output(out) as f:
+        f.write(data)
+    return what
+
+
+def _render(args: argparse.Namespace) -> int:
+    """A mesh file (default scene: fitted camera, the data-driven transfer function) or a
+    scene JSON; a ``.pvd`` (named by either) renders every time step, one file each."""
+    from tetvr.core.camera import _fit
+    from tetvr.io.collections import is_collection, leaf_files, quiet_first_step, read_pvd
+    from tetvr.io.series import read_step
+    from tetvr.core.image import atomic_output
+    from tetvr.render import default_transfer_function, render
+    from tetvr.scene.scene import Scene
+    from tetvr.scene.load import load_scene
+
+    method = "reference" if args.reference else "gpu"
+    t0 = time.perf_counter()
+    with quiet_first_step():  # a .pvd's steps are all rendered here
+        if _is_scene(args.scene):
+            for flag, value in (("--scalars", args.scalars), ("--cmap", args.cmap), ("--component", args.component)):
+                if value is not None:
+                    raise ValueError(f"{flag} is for a mesh file; a scene sets it in its JSON ({args.scene!r})")
+            for path, label in [(args.output, "PNG")] + ([(args.npy, "--npy array")] if args.npy else []):
+                if "{" not in path:
+                    _check_writable(path, label)
+            scene = load_scene(args.scene)
+            inputs = _scene_inputs(args.scene, scene)
+        else:
+            from tetvr.io.meshfile import read
+
+            inputs = [("mesh file", args.scene)]
+            if "{" not in args.output and not is_collection(args.scene):
+                _check_writable(args.output, "PNG")
+                _refuse_overwrite([("PNG", args.output)], inputs)
+            mesh = read(args.scene, args.scalars, component=args.component)
+            size = args.size or (800, 600)
+            scene = Scene(mesh_path=args.scene, mesh=mesh, tf=default_transfer_function(mesh, preset=args.cmap or "viridis"),
+                          camera=_fit(mesh, aspect=size[0] / size[1]), size=size,
+                          scalars=mesh.scalar_name, component=args.component)
+    size = args.size or scene.size
+    background = args.background or scene.background
+    options = _clip_and_surfaces(args, scene)
+    inputs += [("surface file", p) for p in getattr(args, "surface", None) or ()]
+    coll = read_pvd(scene.mesh_path) if Path(scene.mesh_path).suffix.lower() == ".pvd" else None
+    if coll is not None:
+        inputs += [("collection file", p) for p in coll.input_paths()]
+    elif is_collection(scene.mesh_path):
+        inputs += [("collection file", p) for p in leaf_files(scene.mesh_path)]
+    steps = list(enumerate(coll.times)) if coll is not None else [(0, None)]
+    n = len(steps)
+    jobs = []
+    for i, t in steps:
+        png = _step_name(args.output, "PNG", i, t, n) if t is not None else args.output
+        npy = (_npy_path(_step_name(args.npy, "--npy array", i, t, n) if t is not None else args.npy)
+               if args.npy else None)
+        jobs.append((i, t, png, npy))
+    outputs = [("PNG", png) for _, _, png, _ in jobs] + [("--npy array", npy) for _, _, _, npy in jobs if npy]
+    for label, path in outputs:
+        _check_writable(path, label)
+    _refuse_overwrite(outputs, inputs)
+    t1 = time.perf_counter()
+    for i, t, png, npy in jobs:
+        ts = time.perf_counter()
+        mesh = scene.mesh if i == 0 or coll is None else read_step(coll, i, scene.scalars, component=scene.component)
+        image = render(mesh, camera=scene.camera, tf=scene.tf, size=size, settings=scene.settings, method=method,
+                       **options)
+        t2 = time.perf_counter()
+        what = _write_picture(image, png, tf=scene.tf, mesh=mesh, camera=scene.camera, background=background,
+                              annotate=not args.no_annotations, units=args.units,
+                              title=args.title if t is None or not args.title else f"{args.title} (t = {t:g})")
+        if npy:
+            with atomic_output(npy) as f:
+                np.save(f, image)
+        step = f"step {i} (t = {t:g}): " if t is not None else ""
+        print(f"{step}{mesh.n_tets} tets, field {mesh.scalar_name!r}, {size[0]}x{size[1]} px, {method}: "
+              f"read {(t1 - t0) if i == 0 else (ts - t1):.2f} s, render {t2 - ts:.2f} s -> {what} {png}"
+              + (f" and {npy}" if npy else ""))
+        t1 = time.perf_counter()
+    return EXIT_OK
+
+
+def _clip_and_surfaces(args: argparse.Namespace, scene: Any) -> dict[str, Any]:
+    """The scene's clip and surfaces, with --clip-box, --clip-plane and --surface added."""
+    from tetvr.core.clip import Clip
+    from tetvr.core.surface import Surface
+
+    clip = scene.clip
+    box_values = getattr(args, "clip_box", None)  # commands that render a scene without these options
+    if box_values:
+        box = Clip.box(box_values[:3], box_values[3:])
+        clip = box if clip is None else clip & box
+    for values in getattr(args, "clip_plane", None) or ():
+        plane = Clip.plane(values[:3], values[3:])
+        clip = plane if clip is None else clip & plane
+    surfaces = tuple(scene.surfaces) + tuple(Surface.read(p, smooth=True) for p in getattr(args, "surface", None) or ())
+    return {**({"clip": clip} if clip is not None else {}), **({"surfaces": surfaces} if surfaces else {})}
+
+
+def _write_labelled(images: list[Any], titles: list[str], path: Path, *, cols: int | None = None,
+                    suptitle: str | None = None, background: Any = None) -> None:
+    """Pictures with their titles (matplotlib), or, without matplotlib, the plain images
+    side by side and a note saying why they are unlabelled."""
+    from tetvr.core.image import atomic_output, png_bytes
+
+    try:
+        from tetvr.apps.annotate import panels
+
+        bg = {} if background is None else {"background": background}
+        data = panels(images, titles, cols=cols, suptitle=suptitle, width_in=max(2.2, images[0].shape[1] / 110), **bg)
+    except ImportError:
+        print(f"tetvr: note: {path.name} is unlabelled: matplotlib is not installed (pip install 'tetvr[plot]')",
+              file=sys.stderr)
+        from tetvr.apps.annotate import _tiled
+
+        data = png_bytes(_tiled(images), **({} if background is None else {"background": background}))
+    with atomic_output(path) as f:
+        f.write(data)
+
+
+def _fusion_demo(out: Path, size: tuple[int, int]) -> int:
+    from tetvr import FUSION_MODES
+    from tetvr.scene.examples import bundled, carotid_fusion
+    from tetvr.fuse import RayTextures, fuse
+    from tetvr.gl.raycaster import Raycaster
+    from tetvr.gl.renderer import Renderer
+    from tetvr.core.image import image_size
+
+    size = image_size(size)
+    names = {f"fusion_{mode}.png" for mode in FUSION_MODES} | {"mesh_only.png", "volume_only.png", "fusion_modes.png"}
+    if out.is_dir():
+        _refuse_overwrite_in(out, names.__contains__, "the fusion pictures", [("volume file", bundled("carotid.vtk"))])
+    out.mkdir(parents=True, exist_ok=True)
+    scene = carotid_fusion()
+    w, h = size
+    # Ray textures: the left half shows the volume's front half only, the right half all of it.
+    end = np.ones((h, w))
+    end[:, : w // 2] = 0.5
+    textures = RayTextures(np.zeros((h, w)), end)
+    field, vol_name = "speed", "speed"  # carotid.vtk's 'scalars' are the flow speed
+    titles = {"interleave": "interleave: volume, mesh, volume", "overlay": "overlay: mesh over volume",
+              "cutaway": "cutaway: no volume before mesh", "ray_textures": "ray textures: left half cut"}
+    bg = scene.background
+    panels = []
+    with Renderer() as r, Raycaster(ctx=r.ctx) as rc:
+        for mode in FUSION_MODES:
+            img = fuse(scene.mesh, scene.volume, scene.camera, scene.mesh_tf, scene.volume_tf, size=size, mode=mode,
+                       renderer=r, raycaster=rc, ray_textures=textures if mode == "ray_textures" else None)
+            _write_labelled([img], [titles.get(mode, mode)], out / f"fusion_{mode}.png", background=bg)
+            panels.append(img)
+        _write_labelled([r.render(scene.mesh, scene.camera, scene.mesh_tf, size=size)],
+                        [f"mesh only: lumen, {field}"], out / "mesh_only.png", background=bg)
+        _write_labelled([rc.render(scene.volume, scene.camera, scene.volume_tf, size=size)],
+                        [f"volume only: {vol_name}"], out / "volume_only.png", background=bg)
+    _write_labelled(panels, [titles.get(m, m) for m in FUSION_MODES], out / "fusion_modes.png", cols=2, background=bg,
+                    suptitle=f"carotid {field}: {scene.mesh.n_tets} tets in a {'x'.join(map(str, scene.volume.dims))} volume")
+    print(f"{scene.mesh.n_tets} tets in a {scene.volume.dims} volume: wrote {', '.join(FUSION_MODES)} "
+          f"(fusion_modes.png: {FUSION_MODES[0]}, {FUSION_MODES[1]} / {FUSION_MODES[2]}, {FUSION_MODES[3]}) to {out}")
+    return EXIT_OK
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from tetvr.scene.load import load_scene
+    from tetvr.apps.vtkcompare import compare
+
+    scene = load_scene(args.scene)
+    if os.path.isdir(args.output):
+        # write_report's files: comparison.json / .md and a PNG per picture.
+        _refuse_overwrite_in(args.output, lambda name: name.startswith("comparison.") or name.endswith(".png"),
+                             "the comparison", _scene_inputs(args.scene, scene))
+    mappers = [m for m in args.mappers.split(",") if m]
+    compare(scene, mappers=mappers, views=args.views, size=tuple(args.size) if args.size else None,
+            outdir=args.output, log=print)
+    print(f"-> {Path(args.output) / 'comparison.md'}")
+    return EXIT_OK
+
+
+def _animate(args: argparse.Namespace) -> int:
+    from tetvr.apps.animate import animate
+    from tetvr.io.video import VIDEO_SUFFIXES
+    from tetvr.scene.load import load_scene
+
+    scene = load_scene(args.scene)
+    inputs = _scene_inputs(args.scene, scene) + _series_inputs(args.time_series)
+    if Path(args.output).suffix.lower() in VIDEO_SUFFIXES:  # its folder is made if missing
+        if os.path.isdir(args.output):
+            raise IsADirectoryError(f"the video {args.output!r} is a directory; give a file name")
+        _refuse_overwrite([("video", args.output)], inputs)
+    elif os.path.isdir(args.output):
+        _refuse_overwrite_in(args.output, re.compile(r"frame_\d{4,}\.png").fullmatch, "frames",  # type: ignore[arg-type]
+                             inputs)
+    series = _expand_series(args.time_series)
+    scheduler = args.scheduler or os.environ.get("TETVR_SCHEDULER") or None
+    files = animate(scene, args.output, orbit_frames=args.orbit, degrees=args.degrees,
+                    time_series=series, fps=args.fps, progress=not args.no_progress, scheduler=scheduler)
+    print(f"wrote {len(files)} file(s): {files[0]}{' ...' if len(files) > 1 else ''}")
+    return EXIT_OK
+
+
+def _expand_series(series: Sequence[str] | None) -> Any:
+    """The --time-series arguments: one file (an XDMF time series, a .pvd collection, a
+    single step), or mesh files, with glob patterns the shell left unexpanded
+    (``"run/step_*.vtu"``) expanded in natural order (``s2`` before ``s10``)."""
+    if not series:
+        return None
+    import glob
+
+    files: list[str] = []
+    for name in series:
+        if any(ch in name for ch in "*?[") and not os.path.exists(name):
+            found = sorted(glob.glob(name), key=lambda f: [int(p) if p.isdigit() else p for p in re.split(r"(\d+)", f)])
+            if not found:
+                raise FileNotFoundError(f"no file matches {name!r}")
+            files += found
+        else:
+            files.append(name)
+    return files[0] if len(files) == 1 else files
+
+
+def _stats_line(values: Any, weights: Any = None) -> str:
+    """min, percentiles (weighted by volume where given) and max of a field, as text."""
+    from tetvr.optics.transfer import weighted_percentiles
+
+    v = np.asarray(values, dtype=np.float64)
+    if v.ndim == 2:
+        v = np.linalg.norm(v, axis=1)
+    finite = np.isfinite(v)
+    if not finite.any():
+        return "no finite values"
+    w = None if weights is None else np.asarray(weights)[finite]
+    p1, median, p99 = weighted_percentiles(v[finite], w, (1.0, 50.0, 99.0))
+    bad = f", {int((~finite).sum())} NaN/Inf" if not finite.all() else ""
+    return (f"range {v[finite].min():.4g} .. {v[finite].max():.4g}; 1% {p1:.4g}, median {median:.4g}, "
+            f"99% {p99:.4g}{bad}")
+
+
+def _is_volume(path: str) -> bool:
+    from tetvr.io.volume_file import VOLUME_SUFFIXES
+
+    name = path.lower()
+    if os.path.isdir(path):
+        return True
+    if name.endswith(".vtk"):  # legacy VTK: structured points are a volume, anything else a mesh
+        if not os.path.isfile(path):
+            return False
+        try:
+            with open(path, "rb") as f:
+                return b"STRUCTURED_POINTS" in f.read(1024).upper()
+        except OSError:
+            return False
+    return name.endswith(tuple(s for s in VOLUME_SUFFIXES if s != ".vtk"))
+
+
+def _info(args: argparse.Namespace) -> int:
+    if _is_volume(args.mesh):
+        from tetvr.io.volume_file import read_volume
+
+        vol = read_volume(args.mesh)
+        lo, hi = vol.bounds
+        print(f"{args.mesh}: a volume of {vol.dims[0]} x {vol.dims[1]} x {vol.dims[2]} voxels ({vol.dtype}), "
+              f"spacing {' x '.join(f'{v:.4g}' for v in vol.spacing)}"
+              + (f", frame {vol.space}" if vol.space else ""))
+        print(f"  bounds  {' '.join(f'{v:.4g}' for v in lo)} .. {' '.join(f'{v:.4g}' for v in hi)}")
+        print(f"  field   {vol.scalar_name!r}: {_stats_line(vol.data.reshape(-1))}")
+        return EXIT_OK
+    from tetvr.io import meshfile
+    from tetvr.io.meshfile import read_cells
+    from tetvr.mesh.tetmesh import _signed_volume6
+    from tetvr.optics.transfer import point_weights
+
+    mesh = meshfile.read(args.mesh, args.scalars)  # through the module: the checked reader
+    rep = mesh.report
+    lo, hi = mesh.bounds
+    print(f"{args.mesh}: {mesh.n_points} points, {mesh.n_tets} tetrahedra")
+    print(f"  bounds  {' '.join(f'{v:.4g}' for v in lo)} .. {' '.join(f'{v:.4g}' for v in hi)}  "
+          f"(size {' x '.join(f'{v:.4g}' for v in hi - lo)})")
+    if rep.split_cells:
+        print("  cells   " + ", ".join(f"{n} {k}" for k, n in rep.split_cells) + " split into tetrahedra"
+              + (f" ({rep.steiner_points} centroid points added)" if rep.steiner_points else ""))
+    if rep.ignored_cells:
+        print("  left out (not volume cells): " + ", ".join(f"{n} {k}" for k, n in rep.ignored_cells))
+    if rep.dropped_degenerate:
+        print(f"  {rep.dropped_degenerate} zero-volume tetrahedra (flat: their corners lie in a plane) are left out; "
+              "they add nothing to the picture")
+    if rep.inverted_fixed:
+        print(f"  {rep.inverted_fixed} tetrahedra had their corners in inverted (left-handed) order; "
+              "they are turned round, which changes nothing in the picture")
+    cells = read_cells(args.mesh, meshio_read=meshfile._read_any)  # as read() does: collections merged
+    weights = point_weights(cells.points, cells.tets)
+    print("  fields")
+    for name, values in cells.point_data.items():
+        comp = f", {values.shape[1]} components (magnitude)" if values.ndim == 2 and values.shape[1] > 1 else ""
+        mark = "*" if name == mesh.scalar_name else " "
+        print(f"   {mark} {name!r} (point{comp}): {_stats_line(values, weights)}")
+    cell_volume = np.abs(_signed_volume6(cells.points, np.asarray(cells.tets, dtype=np.int64))) / 6.0
+    for name, values in cells.cell_data.items():
+        if name in cells.point_data:
+            continue
+        comp = f", {values.shape[1]} components (magnitude)" if values.ndim == 2 and values.shape[1] > 1 else ""
+        mark = "*" if name == mesh.scalar_name else " "
+        print(f"   {mark} {name!r} (cell{comp}): {_stats_line(values, cell_volume)}")
+    print(f"  * rendered by default; percentiles weighted by volume. Default colour range "
+          f"{' .. '.join(f'{v:.4g}' for v in _default_range(mesh))}")
+    return EXIT_OK
+
+
+def _default_range(mesh: Any) -> tuple[float, float]:
+    from tetvr.render import default_transfer_function
+
+    return default_transfer_function(mesh).domain
+
+
+def _view(args: argparse.Namespace) -> int:
+    from tetvr.apps.viewer.desktop import run_desktop
+
+    run_desktop(args.scene)
+    return EXIT_OK
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from tetvr.scene.scene import demo_scene_path
+
+    return _render(argparse.Namespace(scene=str(demo_scene_path()), output=args.output, npy=None, reference=False,
+                                      scalars=None, component=None, cmap=None, size=None, background=None,
+                                      title=None, units=None, no_annotations=False))
+
+
+_COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "render": _render,
+    "demo": _demo,
+    "fusion-demo": lambda a: _fusion_demo(Path(a.output), tuple(a.size)),
+    "compare": _compare,
+    "info": _info,
+    "view": _view,
+    "animate": _animate,
+}

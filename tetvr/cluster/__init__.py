@@ -1,0 +1,2 @@
+"""Beyond one machine: k-d bricks composited in visibility order, and time series and bricks
+rendered on Dask."""

@@ -1,0 +1,332 @@
+"""Rendering one mesh on a Dask cluster as sort-last bricks.
+
+About this technique
+--------------------
+A k-d tree of axis-aligned planes splits the mesh into bricks (the bricks themselves are
+:mod:`tetvr.cluster.bricks`), each worker holds its bricks (:class:`ClusterBricks`) and
+renders them to premultiplied float images with the shared camera, transfer function,
+table and float32 origin, and the client composites them "over" in the tree's visibility
+order. A mesh held here is split here and its bricks sent (:func:`distribute_mesh`); a
+mesh in solver pieces (a ``.pvtu``) is read and redistributed into bricks on the workers
+(:func:`distribute_pieces`), the client holding only a sample of its cells. The cluster is
+``dask.distributed``'s (:func:`tetvr.cluster.workers.cluster_client`); a time series is
+rendered one task per step by :mod:`tetvr.cluster.timeseries`.
+
+Where the composite is exact, and what it costs: ``docs/distributed.md``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import warnings
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tetvr.cluster.bricks import (Brick, BrickTree, Part, Split, Whole, _check_n_bricks, clip_to_box, composite_over, kd_bricks,
+                                  leaf_boxes, leaf_paths, merge_parts, part_mesh, plan_bricks, select_cells, visibility_order)
+from tetvr.cluster.workers import _dask, cluster_client, worker_renderer
+from tetvr.core.camera import Camera
+from tetvr.core.image import image_size
+from tetvr.mesh.tetmesh import TetMesh
+from tetvr.optics.transfer import TransferFunction
+from tetvr.settings import RenderSettings
+
+__all__ = ["ClusterBricks", "distribute_mesh", "distribute_pieces", "render_bricks", "render_pieces",
+           # the bricks themselves (tetvr.cluster.bricks), here too for one import
+           "Brick", "BrickTree", "Split", "Whole", "kd_bricks", "visibility_order", "composite_over"]
+
+
+
+# ---- sort-last bricks ----
+
+def _render_brick(brick: TetMesh, index: int, label: str, camera: Camera, tf: TransferFunction,
+                  size: tuple[int, int], settings: RenderSettings) -> NDArray[np.float32]:
+    try:
+        return worker_renderer(settings).render(brick, camera, tf, size=size)
+    except Exception as exc:
+        # Named, so that a failed frame says which brick (and which pieces) it was.
+        raise RuntimeError(f"brick {index} ({label}) could not be rendered: {exc}") from exc
+
+
+def _hold(brick: TetMesh) -> TetMesh:
+    return brick
+
+
+def _brick_facts(brick: TetMesh) -> tuple[int, bool]:
+    """A brick's cell count and whether it is tangled (folded faces), which "auto" reads."""
+    from tetvr.mesh.records import folded_faces
+
+    return brick.n_tets, folded_faces(brick) > 0
+
+
+class ClusterBricks:
+    """One mesh as k-d bricks (:mod:`tetvr.cluster.bricks`) held by a cluster's workers, each
+    worker only its bricks; :meth:`render` renders a view on the workers and composites
+    it on the client. Made by :func:`distribute_mesh` or :func:`distribute_pieces`.
+
+    Attributes
+    ----------
+    root : the k-d tree (its planes order the bricks for each view).
+    whole : what the bricks share with the whole mesh (:class:`tetvr.cluster.bricks.Whole`).
+    labels : each brick's name in error messages (the pieces it came from).
+    brick_tets : each brick's cell count (cut pieces included).
+    tangled : whether any brick has folded faces (:func:`tetvr.mesh.records.folded_faces`).
+    """
+
+    def __init__(self, client: Any, futures: dict[int, Any], root: "Split | Brick", whole: Whole,
+                 labels: dict[int, str]) -> None:
+        self.client = client
+        self.futures = futures
+        self.root = root
+        self.whole = whole
+        self.labels = labels
+        # Counted and checked on the workers, where the bricks are.
+        facts = dict(zip(futures, client.gather([client.submit(_brick_facts, f, pure=False)
+                                                 for f in futures.values()])))
+        self.brick_tets = {i: n for i, (n, _) in facts.items()}
+        self.tangled = any(t for _, t in facts.values())
+
+    @property
+    def n_bricks(self) -> int:
+        return len(self.futures)
+
+    def settings_for(self, settings: RenderSettings, camera: Camera, size: tuple[int, int]) -> RenderSettings:
+        """``settings`` with ``method="auto"`` resolved once for every brick (a brick alone
+        could choose another): tet marching wherever it can render the bricks, projected
+        tetrahedra only for settings only they implement
+        (:data:`tetvr.order.method.PROJECTED_ONLY`), a tangled mesh, or a brick above
+        :data:`tetvr.order.method.AUTO_MAX_TETS` cells (memory: the limit is per brick, as a
+        worker renders one brick at a time). Unlike a single mesh, bricks never take
+        projected tetrahedra for speed: the planes' cuts make new faces, and projected
+        tetrahedra err on isolated pixels where a ray grazes a face seen edge-on
+        (docs/distributed.md, "Where the composite is exact"). ``camera`` and ``size`` do
+        not enter the choice."""
+        from tetvr.order.method import AUTO_MAX_TETS, choose
+
+        if settings.method != "auto":
+            return settings
+        method = choose(settings)  # what the settings alone decide
+        if method == "raymarch" and (self.tangled or max(self.brick_tets.values(), default=0) > AUTO_MAX_TETS):
+            method = "projected"
+        return dataclasses.replace(settings, method=method)  # type: ignore[arg-type]
+
+    def render(self, camera: Camera, tf: TransferFunction, *, size: tuple[int, int] = (512, 512),
+               settings: RenderSettings | None = None) -> NDArray[np.float32]:
+        """The (height, width, 4) premultiplied float32 image of the whole mesh."""
+        size = image_size(size)
+        settings = self.settings_for(settings or RenderSettings(), camera, size)
+        c = self.client
+        futures = {i: c.submit(_render_brick, f, i, self.labels[i], camera, tf, size, settings, pure=False)
+                   for i, f in self.futures.items()}
+        images = dict(zip(futures, c.gather(list(futures.values()))))
+        return composite_over([images[i] for i in visibility_order(self.root, camera)])
+
+    def release(self) -> None:
+        """Let the workers drop the bricks."""
+        for f in self.futures.values():
+            f.release()
+        self.futures = {}
+
+
+def distribute_mesh(mesh: TetMesh, n_bricks: int, client: Any, *, tree: BrickTree | None = None) -> ClusterBricks:
+    """Split ``mesh`` (held here) into ``n_bricks`` k-d bricks (:func:`tetvr.cluster.bricks.kd_bricks`)
+    and hand them to the workers of ``client`` (a ``distributed.Client``)."""
+    tree = tree if tree is not None else kd_bricks(mesh, n_bricks)
+    if tree.mesh is not mesh:
+        raise ValueError("tree was split from another mesh")
+    if len(tree.bricks()) != n_bricks:
+        raise ValueError(f"tree has {len(tree.bricks())} bricks, n_bricks is {n_bricks}")
+    if not tree.separable:
+        warnings.warn("some k-d split planes run through cells (kd_bricks(cut=False)): the composite is "
+                      "approximate within a cell's width of those planes", stacklevel=3)
+    # Each brick travels inside its task (not scattered): a worker that dies loses no
+    # data, the scheduler reruns the task elsewhere. Dask warns of such large tasks; here
+    # they are the point (a mesh too large for that is one for distribute_pieces).
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Sending large graph")
+        futures = {b.index: client.submit(_hold, tree.brick_mesh(b), pure=False) for b in tree.bricks()}
+    labels = {i: f"{len(tree.bricks())} k-d bricks of the mesh" for i in futures}
+    return ClusterBricks(client, futures, tree.root, tree.whole, labels)
+
+
+def render_bricks(
+    mesh: TetMesh,
+    camera: Camera,
+    tf: TransferFunction,
+    *,
+    n_bricks: int,
+    size: tuple[int, int] = (512, 512),
+    settings: RenderSettings | None = None,
+    client: Any = None,
+    tree: BrickTree | None = None,
+) -> NDArray[np.float32]:
+    """Render ``mesh`` as ``n_bricks`` k-d bricks (:func:`tetvr.cluster.bricks.kd_bricks`) on the
+    cluster's workers and composite them "over" on the client in visibility order. For
+    several views, keep the bricks on the workers: :func:`distribute_mesh`.
+
+    Returns the (height, width, 4) premultiplied float32 image.
+
+    Examples
+    --------
+    >>> image = render_bricks(mesh, camera, tf, n_bricks=4, size=(256, 256))  # doctest: +SKIP
+    """
+    with cluster_client(client) as c:
+        bricks = distribute_mesh(mesh, n_bricks, c, tree=tree)
+        try:
+            return bricks.render(camera, tf, size=size, settings=settings)
+        finally:
+            bricks.release()
+
+
+# ---- solver pieces, redistributed into k-d bricks on the workers ----
+
+def _read_piece(path: str, scalars: str | None, component: int | None) -> TetMesh:
+    from tetvr.io.meshfile import read
+
+    try:
+        return read(path, scalars, component=component)
+    except Exception as exc:
+        raise ValueError(f"piece {path!r} could not be read: {exc}") from exc
+
+
+def _piece_summary(piece: TetMesh, n_segments: int) -> dict[str, Any]:
+    from tetvr.optics.tablesize import sample_segments
+
+    seg = sample_segments(piece, n_segments)
+    return {"n_tets": piece.n_tets, "bounds": piece.bounds, "scalar_range": piece.scalar_range,
+            "max_edge": piece.max_edge, "segments": seg, "scalar_name": piece.scalar_name,
+            "cell_data": piece.cell_data}
+
+
+def _piece_sample(piece: TetMesh, k: int) -> NDArray[np.float64]:
+    ids = np.linspace(0, piece.n_tets - 1, max(1, min(k, piece.n_tets))).round().astype(np.int64)
+    return piece.points[piece.tets[ids]]
+
+
+def _piece_part(piece: TetMesh, box: NDArray[np.float64]) -> Part:
+    return select_cells(piece, box)
+
+
+def _assemble_brick(index: int, label: str, path: list[tuple[int, float, bool]], whole: Whole, scalar_name: str,
+                    *parts: Part) -> TetMesh:
+    part, _ = clip_to_box(merge_parts(parts), path)
+    if len(part.tets) == 0:
+        raise ValueError(f"brick {index} ({label}) holds no cells: fewer bricks, or a larger sample")
+    return part_mesh(part.points, part.tets, part.scalars, whole, scalar_name=scalar_name, cell_scalars=part.cells)
+
+
+def _combined_sample(summaries: list[dict[str, Any]]) -> Any:
+    """The pieces' segment samples as one, each piece weighted by its share of the cells."""
+    from tetvr.optics.tablesize import SegmentSample
+
+    total = sum(s["n_tets"] for s in summaries)
+    segs = [s["segments"] for s in summaries]
+    w = np.concatenate([g.weight * (s["n_tets"] / total) for g, s in zip(segs, summaries)])
+    return SegmentSample(front=np.concatenate([g.front for g in segs]), back=np.concatenate([g.back for g in segs]),
+                         length=np.concatenate([g.length for g in segs]), weight=w / w.sum())
+
+
+def distribute_pieces(pieces: Any, n_bricks: int, client: Any, *, scalars: str | None = None,
+                      component: int | None = None, sample: int = 20_000) -> ClusterBricks:
+    """Read a mesh's solver pieces on the workers and redistribute them into ``n_bricks``
+    k-d bricks there; the client holds only a sample of the cells.
+
+    ``pieces``: a ``.pvtu`` (or ``.vtm``) file, or a list of mesh files that together make
+    one mesh (points on the pieces' shared faces with equal coordinates are joined). Solver
+    partitions are not convex and cannot be ordered as wholes; the bricks are boxes
+    (ParaView's ``vtkRedistributeDataSet`` before IceT does the same).
+
+    1. each piece is read on a worker (a piece that cannot be read fails naming its file);
+       its summary (bounds, scalar range, longest edge, a segment sample) and a sample of
+       ``sample`` cells in all, drawn evenly, come back;
+    2. the k-d planes are chosen on the sample (:func:`tetvr.cluster.bricks.plan_bricks`);
+    3. each piece sends every brick the cells that overlap its box; the brick's worker
+       joins them and cuts them at its box's planes (:func:`tetvr.cluster.bricks.clip_to_box`).
+
+    Examples
+    --------
+    >>> with cluster_client() as c:                                      # doctest: +SKIP
+    ...     bricks = distribute_pieces("run_0042.pvtu", 8, c)
+    ...     image = bricks.render(camera, tf, size=(1024, 1024))
+    """
+    from tetvr.io.collections import pieces as piece_files
+    from tetvr.optics.tablesize import _N_SEGMENTS
+
+    if isinstance(pieces, (str, os.PathLike)):
+        files = [os.path.abspath(f) for f in piece_files(pieces)]
+    else:
+        files = [os.path.abspath(os.fspath(f)) for f in pieces]
+    if not files:
+        raise ValueError("no pieces given")
+    read = [client.submit(_read_piece, f, scalars, component, pure=False) for f in files]
+    per_piece = max(256, _N_SEGMENTS // len(files))
+    summaries = client.gather([client.submit(_piece_summary, r, per_piece, pure=False) for r in read])
+    total = sum(s["n_tets"] for s in summaries)
+    _check_n_bricks(n_bricks, total)
+    kinds = {(s["scalar_name"], s["cell_data"]) for s in summaries}
+    if len(kinds) > 1:
+        raise ValueError("the pieces do not carry one field: " + ", ".join(
+            f"{os.path.basename(f)}: {s['scalar_name']!r} ({'cell' if s['cell_data'] else 'point'} data)"
+            for f, s in zip(files, summaries)))
+    corners = np.concatenate(client.gather([
+        client.submit(_piece_sample, r, max(1, -(-sample * s["n_tets"] // total)), pure=False)
+        for r, s in zip(read, summaries)]))
+    bounds = np.stack([np.min([s["bounds"][0] for s in summaries], axis=0),
+                       np.max([s["bounds"][1] for s in summaries], axis=0)])
+    whole = Whole(bounds=bounds, float32_origin=bounds.mean(axis=0),
+                  scalar_range=(min(s["scalar_range"][0] for s in summaries),
+                                max(s["scalar_range"][1] for s in summaries)),
+                  max_edge=max(s["max_edge"] for s in summaries), segment_sample=_combined_sample(summaries),
+                  n_tets=total)
+    root = plan_bricks(corners, n_bricks)
+    boxes = leaf_boxes(root, bounds)
+    paths = leaf_paths(root)
+    name = summaries[0]["scalar_name"]
+    futures, labels = {}, {}
+    for i, box in boxes.items():
+        # A piece's cells may overlap the box's bounds but not its inside: such a piece
+        # sends nothing useful, and is named anyway (the label says where cells came from).
+        pieces_in = [k for k, s in enumerate(summaries)
+                     if np.all(s["bounds"][0] < box[1]) and np.all(s["bounds"][1] > box[0])]
+        labels[i] = "pieces " + ", ".join(os.path.basename(files[k]) for k in pieces_in)
+        parts = [client.submit(_piece_part, read[k], box, pure=False) for k in pieces_in]
+        futures[i] = client.submit(_assemble_brick, i, labels[i], paths[i], whole, name, *parts, pure=False)
+    # Made (and any error raised, naming its piece) before the pieces go; waited for, not
+    # gathered: the bricks stay on the workers.
+    _dask().wait(list(futures.values()))
+    for f in futures.values():
+        if f.status == "error":
+            f.result()
+    del read
+    return ClusterBricks(client, futures, root, whole, labels)
+
+
+def render_pieces(
+    pieces: Any,
+    camera: Camera,
+    tf: TransferFunction,
+    *,
+    n_bricks: int,
+    size: tuple[int, int] = (512, 512),
+    settings: RenderSettings | None = None,
+    scalars: str | None = None,
+    component: int | None = None,
+    client: Any = None,
+) -> NDArray[np.float32]:
+    """Render a mesh given as solver pieces (a ``.pvtu``, or a list of files) as
+    ``n_bricks`` k-d bricks on the cluster (:func:`distribute_pieces`); the client never
+    reads the mesh.
+
+    Examples
+    --------
+    >>> image = render_pieces("run_0042.pvtu", camera, tf, n_bricks=8)  # doctest: +SKIP
+    """
+    with cluster_client(client) as c:
+        bricks = distribute_pieces(pieces, n_bricks, c, scalars=scalars, component=component)
+        try:
+            return bricks.render(camera, tf, size=size, settings=settings)
+        finally:
+            bricks.release()

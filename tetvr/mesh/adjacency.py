@@ -1,0 +1,298 @@
+"""Face adjacency of a tetrahedral mesh: neighbours across faces and the face planes.
+
+About this technique
+--------------------
+Cell-connectivity visibility orderings (Williams 1992, MPVO/MPVONC) need, for every
+tetrahedron, the cell on the other side of each of its four faces and the plane of that
+face. Both depend only on the mesh, so they are built once and reused for every view.
+
+A face is keyed by its three vertex ids in ascending order, packed into one int64
+(``(a*N + b)*N + c`` for ``N`` points; a lexicographic sort when ``N**3`` overflows). One
+argsort of the ``4m`` keys puts the two copies of every interior face next to each other,
+so pairing is a comparison of neighbours in the sorted array: O(m log m) in numpy, with
+no Python loop. A face held by more than two cells (a non-manifold mesh) is left
+unpaired, i.e. treated as boundary on every side, and counted.
+
+Each face plane is stored as an outward unit normal ``n`` and an offset ``d`` with
+``n . (x - origin) = d`` on the face, where ``origin`` is the centre of the mesh's
+bounding box: measuring from there keeps ``|d|`` below the mesh radius, so the rounding
+error of a plane test has a bound that does not depend on where the mesh sits in space.
+The two sides of an interior face carry exactly negated planes, so the test ``n . e - d``
+of an eye point ``e`` gives exactly opposite signs for the two cells: the two cells can
+never both claim to be in front.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+import weakref
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tetvr.mesh.tetmesh import TetMesh
+
+__all__ = ["FaceAdjacency", "face_adjacency", "FACE_VERTICES"]
+
+#: Local vertex ids of the face opposite local vertex k (slot k of a tet).
+FACE_VERTICES = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]], dtype=np.intp)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class FaceAdjacency:
+    """Per-tet face neighbours and face planes of one mesh (see :func:`face_adjacency`).
+
+    Slot ``k`` of tet ``t`` is the face opposite vertex ``mesh.tets[t, k]``.
+
+    Attributes
+    ----------
+    neighbors : (m, 4) int32, the tet across each face, -1 on the boundary.
+    mates : (m, 4) int32, the same face as a slot of that neighbour, as the flat index
+        ``4 * neighbor + k`` (so ``mates // 4`` is ``neighbors``), -1 on the boundary.
+    normals : (m, 4, 3) float64, outward unit normal of each face.
+    offsets : (m, 4) float64, ``normals . (x - origin)`` for any point ``x`` of the face.
+    origin : (3,) float64, centre of the mesh's bounding box.
+    radius : largest distance of a mesh point from ``origin``.
+    n_interior_faces : faces shared by two tets.
+    n_boundary_faces : faces on one tet only (including non-manifold ones).
+    n_nonmanifold_faces : distinct faces held by more than two tets (left unpaired).
+    cell_size : median longest edge of the tets, a length scale for heuristics.
+    boundary_slots : (F,) int64 flat slots ``4 * t + k`` of the boundary faces.
+    boundary_faces : (F, 3) vertex ids of those faces (``FACE_VERTICES`` of each slot).
+    convex : whether the mesh fills a convex region: its boundary is one closed,
+        connected, manifold surface, convex at every edge (then it is convex
+        everywhere, Tietze 1928), so MPVO's order is exact from every viewpoint and
+        rays through the boundary (:mod:`tetvr.order.boundary`) add nothing.
+
+    Examples
+    --------
+    >>> from tetvr.mesh import synthetic
+    >>> adj = face_adjacency(synthetic.two_tets())
+    >>> adj.neighbors.tolist()
+    [[-1, -1, -1, 1], [-1, -1, 0, -1]]
+    >>> int(adj.mates[0, 3]), adj.n_interior_faces, adj.n_boundary_faces
+    (6, 1, 6)
+    """
+
+    neighbors: NDArray[np.int32]
+    mates: NDArray[np.int32]
+    normals: NDArray[np.float64]
+    offsets: NDArray[np.float64]
+    origin: NDArray[np.float64]
+    radius: float
+    n_interior_faces: int
+    n_boundary_faces: int
+    n_nonmanifold_faces: int
+    cell_size: float
+    boundary_slots: NDArray[np.int64]
+    boundary_faces: NDArray[np.int64]
+    convex: bool = False
+
+
+# Keyed on the identity of the (points, tets) arrays rather than on the mesh, so that
+# meshes that share geometry (``TetMesh.with_scalars``) share one adjacency. An entry is
+# dropped when either array is freed, before its id can be reused.
+_CACHE: dict[tuple[int, int, bytes], FaceAdjacency] = {}
+_LOCK = threading.Lock()
+
+
+def face_adjacency(mesh: TetMesh) -> FaceAdjacency:
+    """The face adjacency of ``mesh``, built on first use and cached while it lives.
+
+    The cache follows the mesh's ``points`` and ``tets`` arrays (immutable in a
+    :class:`~tetvr.mesh.tetmesh.TetMesh`), so a mesh with only new scalars reuses it, and it
+    does not keep the arrays alive.
+
+    Examples
+    --------
+    >>> from tetvr.mesh import synthetic
+    >>> mesh = synthetic.cube(2)
+    >>> face_adjacency(mesh) is face_adjacency(mesh.with_scalars(mesh.scalars * 2))
+    True
+    """
+    # The origin too: a mesh given another float32 origin shares its arrays with the first.
+    key = (id(mesh.points), id(mesh.tets), mesh.float32_origin.tobytes())
+    adj = _CACHE.get(key)
+    if adj is None:
+        built = _build(mesh)
+        with _LOCK:
+            adj = _CACHE.get(key)
+            if adj is None:
+                adj = _CACHE[key] = built
+                for arr in (mesh.points, mesh.tets):
+                    weakref.finalize(arr, _CACHE.pop, key, None)
+    return adj
+
+
+def _build(mesh: TetMesh) -> FaceAdjacency:
+    tets = np.asarray(mesh.tets, dtype=np.int64)
+    pts = np.asarray(mesh.points, dtype=np.float64)
+    m = tets.shape[0]
+    n_pts = pts.shape[0]
+    if 4 * m > np.iinfo(np.int32).max:  # pragma: no cover - flat slot ids are int32
+        raise ValueError(f"face adjacency supports up to {np.iinfo(np.int32).max // 4} tets, got {m}")
+
+    p, q, n_nonmanifold = _pair_faces(tets, n_pts)
+    mates = np.full(4 * m, -1, dtype=np.int32)
+    mates[p] = q
+    mates[q] = p
+    nbr = np.where(mates >= 0, mates // 4, -1).astype(np.int32)
+
+    origin = np.array(mesh.float32_origin)  # the bounding box's centre unless a whole mesh's was given
+    rel = pts - origin
+    radius = float(np.sqrt(np.max(np.einsum("ij,ij->i", rel, rel))))
+    # Corner coordinates as (m, 4) arrays per axis: component-wise arithmetic on these
+    # avoids the (4m, 3) temporaries of np.cross, which cost more than the sort.
+    cx, cy, cz = (np.ascontiguousarray(rel[:, i])[tets] for i in range(3))
+    normals, offsets = _face_planes(cx, cy, cz, p, q)
+    cell_size = _cell_size(cx, cy, cz)
+
+    neighbors = nbr.reshape(m, 4)
+    mates = mates.reshape(m, 4)
+    for arr in (neighbors, mates, normals, offsets, origin):
+        arr.setflags(write=False)
+    n_interior = int(p.size)
+    boundary_slots = np.flatnonzero(mates.reshape(-1) < 0)
+    boundary_faces = tets[boundary_slots[:, None] >> 2, FACE_VERTICES[boundary_slots & 3]]
+    for out in (boundary_slots, boundary_faces):
+        out.setflags(write=False)
+    convex = n_nonmanifold == 0 and _convex_boundary(boundary_slots, boundary_faces, rel, normals, offsets, cell_size)
+    return FaceAdjacency(
+        neighbors=neighbors,
+        mates=mates,
+        normals=normals,
+        offsets=offsets,
+        origin=origin,
+        radius=radius,
+        n_interior_faces=n_interior,
+        n_boundary_faces=4 * m - 2 * n_interior,
+        n_nonmanifold_faces=n_nonmanifold,
+        cell_size=cell_size,
+        boundary_slots=boundary_slots,
+        boundary_faces=boundary_faces,
+        convex=convex,
+    )
+
+
+def _pair_faces(tets: NDArray[np.int64], n_pts: int) -> tuple[NDArray[np.intp], NDArray[np.intp], int]:
+    """The two flat slots of every interior face (``p[i]`` and ``q[i]`` hold the same
+    face) and the number of non-manifold faces (held by more than two cells: unpaired)."""
+    m = tets.shape[0]
+    # One int64 key per face (slot-major: entry 4*t + k is the face opposite vertex k),
+    # its vertex ids sorted, built column by column to avoid (4m, 3) temporaries.
+    cols = [tets[:, i] for i in range(4)]
+    wide = n_pts <= 2_097_151  # 3 * 21 bits fit an int64
+    key = np.empty((m, 4), dtype=np.int64)
+    sorted_faces = []
+    for k, (i, j, h) in enumerate(FACE_VERTICES):
+        x, y, z = cols[i], cols[j], cols[h]
+        lo = np.minimum(np.minimum(x, y), z)
+        hi = np.maximum(np.maximum(x, y), z)
+        mid = x + y + z - lo - hi
+        if wide:
+            key[:, k] = (lo * n_pts + mid) * n_pts + hi
+        else:  # pragma: no cover - meshes with more than two million points
+            sorted_faces.append((lo, mid, hi))
+    if wide:
+        flat_key = key.reshape(-1)
+        order = np.argsort(flat_key)
+        ks = flat_key[order]
+        same = ks[1:] == ks[:-1]
+    else:  # pragma: no cover
+        lo, mid, hi = (np.stack([f[c] for f in sorted_faces], axis=1).reshape(-1) for c in range(3))
+        order = np.lexsort((hi, mid, lo))
+        lo, mid, hi = lo[order], mid[order], hi[order]
+        same = (lo[1:] == lo[:-1]) & (mid[1:] == mid[:-1]) & (hi[1:] == hi[:-1])
+    del key
+
+    # A pair of equal neighbours is an interior face, unless the run of equal keys is
+    # longer than two (a non-manifold face), which is left as boundary on every side.
+    run_before = np.concatenate(([False], same[:-1]))
+    run_after = np.concatenate((same[1:], [False]))
+    pair = same & ~run_before & ~run_after
+    n_nonmanifold = int(np.count_nonzero(same & ~run_before)) - int(np.count_nonzero(pair))
+    first = np.flatnonzero(pair)
+    return order[first], order[first + 1], n_nonmanifold
+
+
+def _face_planes(cx: NDArray[np.float64], cy: NDArray[np.float64], cz: NDArray[np.float64], p: NDArray[np.intp],
+                 q: NDArray[np.intp]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Outward unit normals (m, 4, 3) and offsets (m, 4) of every face, from the corner
+    coordinates (m, 4) per axis; the slots ``q`` get the exact negation of their mates ``p``."""
+    m = cx.shape[0]
+    normals = np.empty((m, 4, 3))
+    offsets = np.empty((m, 4))
+    for k, (i, j, h) in enumerate(FACE_VERTICES):
+        ux, uy, uz = cx[:, j] - cx[:, i], cy[:, j] - cy[:, i], cz[:, j] - cz[:, i]
+        vx, vy, vz = cx[:, h] - cx[:, i], cy[:, h] - cy[:, i], cz[:, h] - cz[:, i]
+        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        # Outward: the opposite vertex lies on the negative side of the plane.
+        side = nx * (cx[:, k] - cx[:, i]) + ny * (cy[:, k] - cy[:, i]) + nz * (cz[:, k] - cz[:, i])
+        scale = np.where(side > 0, -1.0, 1.0) / np.sqrt(nx * nx + ny * ny + nz * nz)
+        nx *= scale
+        ny *= scale
+        nz *= scale
+        normals[:, k, 0], normals[:, k, 1], normals[:, k, 2] = nx, ny, nz
+        offsets[:, k] = nx * cx[:, i] + ny * cy[:, i] + nz * cz[:, i]
+    # The second copy of each interior face gets the exact negation of the first, so the
+    # plane tests of the two cells can never disagree (not even by rounding).
+    flat_n = normals.reshape(-1, 3)
+    flat_d = offsets.reshape(-1)
+    flat_n[q] = -flat_n[p]
+    flat_d[q] = -flat_d[p]
+    return normals, offsets
+
+
+def _cell_size(cx: NDArray[np.float64], cy: NDArray[np.float64], cz: NDArray[np.float64]) -> float:
+    """The median over the cells of the longest edge, from the corner coordinates (m, 4) per axis."""
+    longest = np.zeros(cx.shape[0])
+    for i, j in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)):
+        ex, ey, ez = cx[:, i] - cx[:, j], cy[:, i] - cy[:, j], cz[:, i] - cz[:, j]
+        np.maximum(longest, ex * ex + ey * ey + ez * ez, out=longest)
+    return float(np.sqrt(np.median(longest)))
+
+
+def _convex_boundary(slots: NDArray[np.int64], verts: NDArray[np.int64], rel: NDArray[np.float64],
+                     normals: NDArray[np.float64], offsets: NDArray[np.float64], cell_size: float) -> bool:
+    """Whether the boundary faces form one closed connected surface, convex at every edge.
+
+    Each boundary edge must be held by exactly two boundary faces, and the far vertex of
+    each must lie on or behind the other's plane (within a rounding tolerance relative to
+    the cell size). Connectivity is checked by propagating the smallest face label across
+    shared edges, with pointer jumping, to a fixed point.
+    """
+    if slots.size < 4:
+        return False
+    n_f = slots.size
+    # The three edges of every boundary face, as (face, sorted vertex pair, far vertex).
+    ea = np.concatenate([verts[:, 0], verts[:, 1], verts[:, 2]])
+    eb = np.concatenate([verts[:, 1], verts[:, 2], verts[:, 0]])
+    far = np.concatenate([verts[:, 2], verts[:, 0], verts[:, 1]])
+    face = np.tile(np.arange(n_f), 3)
+    lo, hi = np.minimum(ea, eb), np.maximum(ea, eb)
+    order = np.lexsort((hi, lo))
+    lo, hi, far, face = lo[order], hi[order], far[order], face[order]
+    same = (lo[1:] == lo[:-1]) & (hi[1:] == hi[:-1])
+    # Closed manifold surface: the edges come in exactly two copies.
+    if lo.size % 2 or not np.all(same[0::2]) or np.any(same[1::2]):
+        return False
+    f, g = face[0::2], face[1::2]
+    far_f, far_g = far[0::2], far[1::2]
+    n = normals.reshape(-1, 3)[slots]
+    d = offsets.reshape(-1)[slots]
+    tol = 1e-9 * max(cell_size, 1e-300)
+    if np.any(np.einsum("ij,ij->i", n[f], rel[far_g]) - d[f] > tol):
+        return False
+    if np.any(np.einsum("ij,ij->i", n[g], rel[far_f]) - d[g] > tol):
+        return False
+    label = np.arange(n_f)
+    while True:
+        low = np.minimum(label[f], label[g])
+        new = label.copy()
+        np.minimum.at(new, f, low)
+        np.minimum.at(new, g, low)
+        new = new[new]  # pointer jumping
+        if np.array_equal(new, label):
+            return bool(np.all(label == 0))
+        label = new

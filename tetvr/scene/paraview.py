@@ -1,0 +1,515 @@
+"""ParaView state files (``.pvsm``) in: the view, the colour and opacity maps, the data.
+
+About this format
+-----------------
+ParaView's "Save State" writes its server-manager state as XML::
+
+    <ParaView><ServerManagerState version="5.11.0">
+      <Proxy group="sources" type="LegacyVTKReader" id="..">        FileNames
+      <Proxy group="representations" type="UnstructuredGridRepresentation" id="..">
+          Input, Representation ("Volume"), ColorArrayName, LookupTable,
+          ScalarOpacityFunction, ScalarOpacityUnitDistance, SelectMapper, Visibility
+      <Proxy group="lookup_tables" type="PVLookupTable" id="..">    RGBPoints, ColorSpace,
+          Discretize, NumberOfTableValues, UseLogScale, NanColor, Above/BelowRangeColor
+      <Proxy group="piecewise_functions" type="PiecewiseFunction">  Points (x, a, midpoint, sharpness)
+      <Proxy group="views" type="RenderView" id="..">               CameraPosition, CameraFocalPoint,
+          CameraViewUp, CameraViewAngle, CameraParallelProjection, CameraParallelScale,
+          ViewSize, Background, Representations
+    </ServerManagerState></ParaView>
+
+Every ``<Property>`` holds ``<Element index=".." value=".."/>`` values or ``<Proxy
+value="id"/>`` references. :func:`read_state` pulls out what a volume rendering needs;
+:func:`load_state` turns it into a :class:`~tetvr.scene.scene.Scene` (also what
+``tetvr.load_scene("x.pvsm")`` and ``tetvr render x.pvsm`` do).
+
+How each part maps (docs/paraview.md has the user's view of it):
+
+* **Camera** -- 1:1 (VTK's fields are tetvr's). A state stores no clipping range (ParaView
+  recomputes it every frame): it is computed from the data as ParaView does
+  (:func:`tetvr.core.camera.reset_clipping_range`).
+* **Colour map** -- ``RGBPoints`` in any ParaView colour space (through
+  :func:`tetvr.optics.colormaps.from_paraview`); ``UseLogScale`` interpolates in log10 of the
+  scalar (:meth:`~tetvr.optics.transfer.TransferFunction.log_scaled`); ``Discretize`` becomes
+  ``NumberOfTableValues`` constant bands of 8-bit colours, as VTK's lookup table holds
+  them; ``UseAboveRangeColor`` / ``UseBelowRangeColor`` become a jump to that colour
+  just past the map's ends.
+* **Opacity map** -- ``Points`` with their midpoint and sharpness (non-linear pieces are
+  followed by linear ones), in log scale when the function says so; the representation's
+  ``ScalarOpacityUnitDistance`` is the unit distance.
+* **Not carried over**: filters between the reader and the representation (the state is
+  refused, naming them), ``NanColor`` (tetvr refuses NaN scalars when it reads a mesh, so
+  there is nothing to colour), ``HSVWrap``, gradient backgrounds (the first colour is
+  used), lights, scalar bars and annotations; only one representation (the visible
+  volume, else the first visible one) is rendered.
+
+Examples
+--------
+>>> scene = load_state("post.pvsm")              # doctest: +SKIP
+>>> scene.camera.view_angle, scene.tf.unit_distance  # doctest: +SKIP
+(30.0, 0.197)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from tetvr.core.checks import check_input_file, warn
+from tetvr.core.camera import Camera, reset_clipping_range
+
+if TYPE_CHECKING:
+    from tetvr.mesh.tetmesh import TetMesh
+    from tetvr.scene.scene import Scene
+    from tetvr.optics.transfer import TransferFunction, paraview_unit_distance
+
+__all__ = ["ParaViewState", "load_state", "read_state", "state_transfer_function"]
+
+#: ParaView's ``ColorSpace`` enumeration (5.11), used where a state omits the names.
+_COLOR_SPACES = {0: "RGB", 1: "HSV", 2: "Lab", 3: "Diverging", 4: "Lab/CIEDE2000", 5: "Step"}
+#: vtkDataObject field associations of ``ColorArrayName``'s fourth element.
+_ASSOCIATIONS = {0: "POINTS", 1: "CELLS"}
+#: Linear pieces per node interval where ParaView's curve is not linear (colour spaces other
+#: than RGB, opacity midpoints and sharpness): 256 keep a Diverging map within ~3e-5 of VTK's.
+_SAMPLES_PER_SEGMENT = 256
+
+
+@dataclasses.dataclass(frozen=True)
+class ParaViewState:
+    """What a ``.pvsm`` says about one volume rendering (:func:`read_state`).
+
+    Positions are in the data's units. ``camera`` holds the view's camera with a
+    placeholder clipping range (a state has none: :func:`load_state` computes it from the
+    data). ``opacity_points`` rows are ``(x, a, midpoint, sharpness)``.
+    """
+
+    path: str
+    version: str
+    data_file: str
+    reader: str
+    array: str | None
+    association: str
+    component: int | None
+    representation: str
+    mapper: str | None
+    camera: Camera
+    view_size: tuple[int, int] | None
+    background: tuple[float, float, float]
+    color_space: str
+    rgb_points: tuple[tuple[float, float, float, float], ...]
+    opacity_points: tuple[tuple[float, float, float, float], ...]
+    unit_distance: float | None
+    discretize: bool = False
+    n_table_values: int = 256
+    log_scale: bool = False
+    opacity_log_scale: bool = False
+    nan_color: tuple[float, float, float] = (1.0, 1.0, 0.0)
+    above_range_color: tuple[float, float, float] | None = None
+    below_range_color: tuple[float, float, float] | None = None
+    view_time: float | None = None
+
+
+# ---------------------------------------------------------------- reading the XML
+class _Proxy:
+    def __init__(self, elem: ET.Element) -> None:
+        self.group = elem.get("group", "")
+        self.type = elem.get("type", "")
+        self.id = elem.get("id", "")
+        self.props = {p.get("name", ""): p for p in elem.findall("Property")}
+
+    def values(self, name: str) -> list[str]:
+        prop = self.props.get(name)
+        if prop is None:
+            return []
+        items = sorted(prop.findall("Element"), key=lambda e: int(e.get("index", "0")))
+        return [e.get("value", "") for e in items]
+
+    def refs(self, name: str) -> list[str]:
+        prop = self.props.get(name)
+        return [] if prop is None else [p.get("value", "") for p in prop.findall("Proxy")]
+
+    def floats(self, name: str, n: int | None = None) -> list[float] | None:
+        vals = self.values(name)
+        if not vals:
+            return None
+        try:
+            out = [float(v) for v in vals]
+        except ValueError:
+            raise ValueError(f"{self.type} property {name} holds {vals!r}, not numbers") from None
+        if n is not None and len(out) != n:
+            raise ValueError(f"{self.type} property {name} holds {len(out)} numbers, expected {n}")
+        return out
+
+    def number(self, name: str, default: float | None = None) -> float | None:
+        vals = self.floats(name)
+        return default if not vals else vals[0]
+
+    def flag(self, name: str, default: bool = False) -> bool:
+        value = self.number(name)
+        return default if value is None else bool(value)
+
+    def text(self, name: str, default: str | None = None) -> str | None:
+        vals = self.values(name)
+        return vals[0] if vals else default
+
+    def enum_text(self, name: str, table: dict[int, str]) -> str | None:
+        """An enumeration's entry, by the names the state lists (else ``table``)."""
+        raw = self.number(name)
+        if raw is None:
+            return None
+        prop = self.props[name]
+        for entry in prop.iter("Entry"):
+            if entry.get("value") == str(int(raw)):
+                return entry.get("text")
+        return table.get(int(raw), str(int(raw)))
+
+
+def read_state(path: str | os.PathLike[str]) -> ParaViewState:
+    """Parse a ParaView state file (``.pvsm``).
+
+    The rendered representation is the visible one shown as ``"Volume"`` (else the first
+    visible one coloured by an array), the view is the render view that shows it.
+
+    Raises
+    ------
+    ValueError : not a state file, no such representation, or a filter between the
+        representation and its reader (tetvr reads the data file; it does not run filters).
+    """
+    path = check_input_file(path, "ParaView state file")
+    version, proxies = _parse_state(path)
+    rep, src, files = _rendered(proxies, path)
+    view = _render_view(proxies, rep, path)
+    view_time = view.number("ViewTime")
+    times = src.floats("TimestepValues") or []
+    data_file = files[0]
+    if len(files) > 1 and len(times) == len(files) and view_time is not None:
+        data_file = files[int(np.argmin(np.abs(np.asarray(times) - view_time)))]
+
+    camera = _camera(view, path)
+    size = view.floats("ViewSize", 2)
+    background = _background(view, proxies)
+
+    # The colour map, its opacity function, the array.
+    name_vals = rep.values("ColorArrayName")
+    array = name_vals[4] if len(name_vals) >= 5 and name_vals[4] else None
+    assoc = _ASSOCIATIONS.get(int(float(name_vals[3])), "POINTS") if len(name_vals) >= 5 and name_vals[3] else "POINTS"
+    lut_ids = rep.refs("LookupTable")
+    lut = proxies.get(lut_ids[0]) if lut_ids else None
+    if lut is None or array is None:
+        raise ValueError(f"{path}: the representation colours by no array (solid colour); a volume rendering "
+                         "needs an array and its colour map")
+    pwf_ids = rep.refs("ScalarOpacityFunction") or lut.refs("ScalarOpacityFunction")
+    pwf = proxies.get(pwf_ids[0]) if pwf_ids else None
+    rgb = _rows(lut.floats("RGBPoints"), 4, "RGBPoints", path)
+    if pwf is not None and pwf.floats("Points"):
+        op = _rows(pwf.floats("Points"), 4, "Points", path)
+    else:  # ParaView's default opacity function: a ramp over the colour map's range
+        op = ((rgb[0][0], 0.0, 0.5, 0.0), (rgb[-1][0], 1.0, 0.5, 0.0))
+    component = None
+    if lut.enum_text("VectorMode", {0: "Magnitude", 1: "Component"}) == "Component":
+        component = int(lut.number("VectorComponent", 0.0) or 0)
+
+    def colour(name: str, use: str) -> tuple[float, float, float] | None:
+        c = lut.floats(name, 3)
+        return tuple(c) if c is not None and lut.flag(use) else None  # type: ignore[return-value]
+
+    unit = rep.number("ScalarOpacityUnitDistance")
+    return ParaViewState(
+        path=os.fspath(path), version=version, data_file=data_file, reader=src.type, array=array,
+        association=assoc, component=component, representation=rep.text("Representation", "") or "",
+        mapper=rep.text("SelectMapper"), camera=camera,
+        view_size=(int(size[0]), int(size[1])) if size and size[0] >= 1 and size[1] >= 1 else None,
+        background=background, color_space=lut.enum_text("ColorSpace", _COLOR_SPACES) or "RGB",
+        rgb_points=rgb, opacity_points=op,  # type: ignore[arg-type]
+        unit_distance=unit if unit is not None and unit > 0 else None,
+        discretize=lut.flag("Discretize") and not lut.flag("IndexedLookup"),
+        n_table_values=int(lut.number("NumberOfTableValues", 256) or 256),
+        log_scale=lut.flag("UseLogScale"),
+        opacity_log_scale=pwf.flag("UseLogScale") if pwf is not None else False,
+        nan_color=tuple(lut.floats("NanColor", 3) or (1.0, 1.0, 0.0)),  # type: ignore[arg-type]
+        above_range_color=colour("AboveRangeColor", "UseAboveRangeColor"),
+        below_range_color=colour("BelowRangeColor", "UseBelowRangeColor"),
+        view_time=view_time,
+    )
+
+
+def _parse_state(path: str) -> tuple[str, dict[str, _Proxy]]:
+    """The state's version and its proxies by id."""
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise ValueError(f"{path}: not a ParaView state file (not valid XML: {exc})") from None
+    sms = root if root.tag == "ServerManagerState" else root.find("ServerManagerState")
+    if sms is None:
+        raise ValueError(f"{path}: not a ParaView state file (no <ServerManagerState>, root is <{root.tag}>)")
+    version = sms.get("version", "")
+    return version, {p.id: p for p in (_Proxy(e) for e in sms.findall("Proxy"))}
+
+
+def _rendered(proxies: dict[str, _Proxy], path: str) -> tuple[_Proxy, _Proxy, list[str]]:
+    """The representation rendered (the visible volume, else the first visible one coloured by
+    an array), the reader it shows directly (a filter between them is an error) and its files."""
+    reps = [p for p in proxies.values() if p.group == "representations" and p.refs("Input")
+            and p.flag("Visibility", True) and p.props.get("ColorArrayName") is not None]
+    if not reps:
+        raise ValueError(f"{path}: the state shows no dataset (no visible representation with an input)")
+    # Stable: a volume first, then one coloured by an array.
+    reps.sort(key=lambda r: (r.text("Representation", "") != "Volume",
+                             len(r.values("ColorArrayName")) < 5 or not r.values("ColorArrayName")[4]))
+    rep = reps[0]
+    ids = rep.refs("Input")
+    src = proxies.get(ids[0]) if ids else None
+    if src is None:
+        raise ValueError(f"{path}: representation {rep.id} reads proxy {rep.refs('Input')[0]}, which the state lacks")
+    if src.group != "sources":
+        chain = [src.type]
+        up = src
+        while up.group != "sources" and up.refs("Input") and up.refs("Input")[0] in proxies:
+            up = proxies[up.refs("Input")[0]]
+            chain.append(up.type)
+        raise ValueError(f"{path}: the rendered data comes through ParaView filter(s) {' <- '.join(chain)}; "
+                         "tetvr reads "
+                         "data files, not pipelines: save the filter's output (File > Save Data) and open that")
+    files = src.values("FileNames") or src.values("FileName")
+    if not files or not files[0]:
+        raise ValueError(f"{path}: the source {src.type} (id {src.id}) names no data file; tetvr reads files only")
+    return rep, src, files
+
+
+def _render_view(proxies: dict[str, _Proxy], rep: _Proxy, path: str) -> _Proxy:
+    """The render view that shows ``rep`` (else the first render view)."""
+    views = [p for p in proxies.values() if p.group == "views" and rep.id in p.refs("Representations")]
+    if not views:
+        views = [p for p in proxies.values() if p.group == "views" and p.type.endswith("RenderView")]
+    if not views:
+        raise ValueError(f"{path}: the state has no render view")
+    return views[0]
+
+
+def _rows(values: list[float] | None, width: int, name: str, path: str) -> tuple[tuple[float, ...], ...]:
+    if not values or len(values) % width:
+        raise ValueError(f"{path}: {name} must hold groups of {width} numbers, got {0 if not values else len(values)}")
+    return tuple(tuple(values[i:i + width]) for i in range(0, len(values), width))
+
+
+def _camera(view: _Proxy, path: str) -> Camera:
+    pos = view.floats("CameraPosition", 3)
+    foc = view.floats("CameraFocalPoint", 3)
+    if pos is None or foc is None:
+        raise ValueError(f"{path}: the render view stores no camera (CameraPosition, CameraFocalPoint)")
+    try:
+        return Camera(position=tuple(pos), focal_point=tuple(foc),  # type: ignore[arg-type]
+                      view_up=tuple(view.floats("CameraViewUp", 3) or (0.0, 1.0, 0.0)),  # type: ignore[arg-type]
+                      view_angle=view.number("CameraViewAngle", 30.0),  # type: ignore[arg-type]
+                      parallel_projection=view.flag("CameraParallelProjection"),
+                      parallel_scale=view.number("CameraParallelScale", 1.0))  # type: ignore[arg-type]
+    except ValueError as exc:
+        raise ValueError(f"{path}: the render view's camera is not usable: {exc}") from None
+
+
+def _background(view: _Proxy, proxies: dict[str, _Proxy]) -> tuple[float, float, float]:
+    colour = view.floats("Background", 3)
+    if view.flag("UseColorPaletteForBackground"):
+        palette = [p for p in proxies.values() if p.type == "ColorPalette"]
+        if palette and palette[0].floats("BackgroundColor", 3):
+            colour = palette[0].floats("BackgroundColor", 3)
+    if colour is None:
+        colour = [0.32, 0.34, 0.43]  # ParaView's default palette
+    return tuple(min(max(float(c), 0.0), 1.0) for c in colour)  # type: ignore[return-value]
+
+
+# ---------------------------------------------------------------- the transfer function
+def state_transfer_function(state: ParaViewState, *, unit_distance: float | None = None) -> "TransferFunction":
+    """The state's colour and opacity maps as a :class:`~tetvr.TransferFunction`.
+
+    ``unit_distance`` defaults to the state's ``ScalarOpacityUnitDistance`` (then 1.0).
+    See the module notes for what each ParaView option becomes.
+    """
+    from tetvr.optics.colormaps import from_paraview
+    from tetvr.optics.transfer import TransferFunction
+
+    u = unit_distance if unit_distance is not None else (state.unit_distance or 1.0)
+    rgb = np.array(state.rgb_points, dtype=np.float64)
+    op = np.array(state.opacity_points, dtype=np.float64)
+    for on, rows, what in ((state.log_scale, rgb, "colour map"), (state.opacity_log_scale, op, "opacity function")):
+        if on:
+            if np.any(rows[:, 0] <= 0):
+                raise ValueError(f"{state.path}: the {what} uses a log scale over positions reaching "
+                                 f"{rows[:, 0].min():g} (<= 0), which a log scale cannot map")
+            rows[:, 0] = np.log10(rows[:, 0])
+    # Colour spaces and midpoint/sharpness are resampled on the (log) axis the state interpolates on.
+    base = from_paraview({"Name": Path(state.path).name, "ColorSpace": state.color_space,
+                          "RGBPoints": rgb.ravel().tolist(), "Points": op.ravel().tolist()}, unit_distance=u,
+                         samples_per_segment=_SAMPLES_PER_SEGMENT)
+    color = np.array(base.color)
+    opacity = np.array(base.opacity)
+    if state.log_scale:
+        color[:, 0] = 10.0 ** color[:, 0]
+    if state.opacity_log_scale:
+        opacity[:, 0] = 10.0 ** opacity[:, 0]
+    tf = TransferFunction(color=_ascending(color), opacity=_ascending(opacity),  # type: ignore[arg-type]
+                          unit_distance=u)
+    tf = tf.log_scaled(color=state.log_scale, opacity=state.opacity_log_scale)
+    lo, hi = state.rgb_points[0][0], state.rgb_points[-1][0]
+    color_rows: list[tuple[float, ...]] = list(tf.color)
+    if state.discretize and hi > lo:
+        color_rows = _discretized(state, lo, hi)
+    eps = 1e-9 * max(abs(hi - lo), abs(hi), abs(lo), 1e-300)
+    if state.below_range_color is not None:
+        color_rows.insert(0, (color_rows[0][0] - eps, *_eight_bit(state.below_range_color, state.discretize)))
+    if state.above_range_color is not None:
+        color_rows.append((color_rows[-1][0] + eps, *_eight_bit(state.above_range_color, state.discretize)))
+    return dataclasses.replace(tf, color=tuple(color_rows))  # type: ignore[arg-type]  # rows of 4, built above
+
+
+def _ascending(rows: Any) -> tuple[tuple[float, ...], ...]:
+    """Rows whose positions ascend strictly (10**x may merge two that were apart in x)."""
+    rows = np.asarray(rows)
+    keep = np.concatenate([[True], np.diff(rows[:, 0]) > 0])
+    return tuple(tuple(float(v) for v in r) for r in rows[keep])
+
+
+def _eight_bit(rgb: Any, on: bool) -> tuple[float, ...]:
+    # A discretized map's colours live in vtkLookupTable's 8-bit table: (uchar)(255 c + 0.5).
+    c = np.clip(np.asarray(rgb, dtype=np.float64), 0.0, 1.0)
+    return tuple(float(v) for v in (np.floor(255.0 * c + 0.5) / 255.0 if on else c))
+
+
+def _discretized(state: ParaViewState, lo: float, hi: float) -> list[tuple[float, ...]]:
+    """``n`` constant bands over ``[lo, hi]`` (equal in log10 with a log scale), band ``i``
+    taking the colour at ``lo + i (hi - lo) / (n - 1)``: what
+    ``vtkDiscretizableColorTransferFunction`` samples into its 8-bit lookup table, which
+    then maps ``v`` to band ``floor((v - lo) n / (hi - lo))`` (the top value to the last)."""
+    n, log = state.n_table_values, state.log_scale
+    if n < 1:
+        raise ValueError(f"{state.path}: NumberOfTableValues must be at least 1, got {n}")
+    a, b = (math.log10(lo), math.log10(hi)) if log else (lo, hi)
+    samples = a + (b - a) * (np.arange(n) / (n - 1) if n > 1 else np.array([0.5]))
+    edges = a + (b - a) * np.arange(n + 1) / n
+    if log:
+        edges = 10.0 ** edges
+    # The curve itself at the samples (not its linear pieces): a band's 8-bit colour is
+    # rounded from it, and a piece's small error would move some across a rounding step.
+    colours = np.floor(255.0 * np.clip(_colour_curve(state, samples, log), 0.0, 1.0) + 0.5) / 255.0
+    eps = 1e-9 * max(abs(hi - lo), 1e-300)
+    rows: list[tuple[float, ...]] = [(float(lo), *colours[0])]
+    for i in range(1, n):
+        rows.append((float(edges[i]) - eps, *colours[i - 1]))
+        rows.append((float(edges[i]), *colours[i]))
+    rows.append((float(hi), *colours[-1]))
+    return [tuple(float(v) for v in r) for r in rows]
+
+
+def _colour_curve(state: ParaViewState, x: Any, log: bool) -> Any:
+    """vtkColorTransferFunction's colour at positions ``x`` (log10 positions with a log
+    scale), in the state's colour space, between its RGBPoints."""
+    from tetvr.optics.colormaps import _interp_space
+
+    nodes = np.array(state.rgb_points, dtype=np.float64)
+    xs = np.log10(nodes[:, 0]) if log else nodes[:, 0]
+    x = np.clip(np.asarray(x, dtype=np.float64), xs[0], xs[-1])
+    seg = np.clip(np.searchsorted(xs, x, side="right") - 1, 0, len(xs) - 2)
+    out = np.empty((len(x), 3))
+    space = "Lab" if state.color_space == "Lab/CIEDE2000" else state.color_space
+    for k in np.unique(seg):
+        pick = seg == k
+        width = xs[k + 1] - xs[k]
+        t = (x[pick] - xs[k]) / width if width > 0 else np.ones(int(pick.sum()))
+        c1, c2 = nodes[k, 1:], nodes[k + 1, 1:]
+        if space == "RGB":
+            out[pick] = c1 + t[:, None] * (c2 - c1)
+        elif space == "Step":
+            out[pick] = np.where((t >= 1.0)[:, None], c2, c1)
+        else:
+            out[pick] = _interp_space(c1, c2, t, space)
+    return out
+
+
+# ---------------------------------------------------------------- the scene
+def _find_data(name: str, state_path: str, data_directory: str | os.PathLike[str] | None) -> str:
+    """The data file a state names: as written (ParaView writes absolute paths), else
+    beside the state, else in ``data_directory`` (ParaView's "Search files under
+    specified directory")."""
+    folder = Path(state_path).resolve().parent
+    tries = [Path(name), folder / name, folder / Path(name).name]
+    if data_directory is not None:
+        tries += [Path(data_directory) / name, Path(data_directory) / Path(name).name]
+    for p in tries:
+        if p.is_file():
+            return str(p)
+    raise FileNotFoundError(f"{state_path}: its data file {name!r} is neither there nor beside the state"
+                            + (f" nor in {os.fspath(data_directory)!r}" if data_directory is not None else "")
+                            + "; put it beside the state file, or pass data_directory= (the folder that holds it) "
+                            "to tetvr.scene.paraview.load_state")
+
+
+def load_state(
+    path: str | os.PathLike[str],
+    *,
+    data_directory: str | os.PathLike[str] | None = None,
+    parity: bool = False,
+    size: tuple[int, int] | None = None,
+) -> "Scene":
+    """A :class:`~tetvr.scene.scene.Scene` from a ParaView state file (``.pvsm``).
+
+    Parameters
+    ----------
+    path : the state file.
+    data_directory : where to look for the data file when the path the state names does
+        not exist here (ParaView writes absolute paths); the state's own folder is tried first.
+    parity : render with :data:`tetvr.settings.PARITY_SETTINGS` (ParaView's "Projected
+        tetra" picture) instead of tetvr's exact default.
+    size : (width, height); default the state's view size.
+
+    Examples
+    --------
+    >>> scene = load_state("post.pvsm", parity=True)   # doctest: +SKIP
+    >>> image = tetvr.render(scene.mesh, camera=scene.camera, tf=scene.tf, size=scene.size,
+    ...                      settings=scene.settings)  # doctest: +SKIP
+    """
+    from tetvr.core.image import image_size
+    from tetvr.io.meshfile import read
+    from tetvr.scene.scene import Scene
+    from tetvr.settings import RenderSettings
+
+    state = read_state(path)
+    if state.representation and state.representation != "Volume":
+        warn(f"{state.path}: the dataset is shown as {state.representation!r} in ParaView; tetvr renders "
+             "it as a volume with the state's colour and opacity maps", UserWarning)
+    mesh_path = _find_data(state.data_file, state.path, data_directory)
+    mesh = _read_mesh(mesh_path, state, read)
+    if state.association == "CELLS" and mesh.report.scalar_source != "cell":
+        warn(f"{state.path}: ParaView colours by the cell array {state.array!r}, tetvr found a point array "
+             "of that name and renders it", UserWarning)
+    tf = state_transfer_function(state)
+    if state.unit_distance is None:
+        tf = dataclasses.replace(tf, unit_distance=paraview_unit_distance(mesh.bounds, mesh.n_tets))
+    camera = reset_clipping_range(state.camera, mesh.bounds)
+    if parity:
+        from tetvr.settings import PARITY_SETTINGS
+
+        settings = PARITY_SETTINGS
+    else:
+        settings = RenderSettings()
+    out_size = image_size(size) if size is not None else (state.view_size or (512, 512))
+    return Scene(mesh_path=mesh_path, mesh=mesh, tf=tf, camera=camera, size=out_size, background=state.background,
+                 settings=settings, scalars=mesh.scalar_name, component=state.component)
+
+
+def _read_mesh(mesh_path: str, state: ParaViewState, read: Any) -> "TetMesh":
+    # A .pvd shown at a time: that step (tetvr.read would take the first).
+    if Path(mesh_path).suffix.lower() == ".pvd" and state.view_time is not None:
+        try:
+            from tetvr.io.collections import read_pvd
+            from tetvr.io.series import read_step
+        except ImportError:  # pragma: no cover - collections are optional here
+            return read(mesh_path, state.array, component=state.component)
+        coll = read_pvd(mesh_path)
+        step = int(np.argmin(np.abs(np.asarray(coll.times, dtype=np.float64) - state.view_time)))
+        return read_step(coll, step, state.array, component=state.component)
+    return read(mesh_path, state.array, component=state.component)
