@@ -394,7 +394,29 @@ def stability_cases() -> str:
             + "\n".join(rows))
 
 
-TABLES: dict[str, Callable[[], str]] = {"parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
+def imperfect_meshes() -> str:
+    """docs/limits.md: each imperfect-mesh class, what ``auto`` chose, and every method's
+    largest per-pixel error against the reference (bench/imperfect.py)."""
+    r = _load("imperfect.json")
+
+    def cell(rec: dict[str, Any]) -> str:
+        if "refused" in rec:
+            return "refused"
+        return f"{rec['max_error']:.1e} ({rec['beyond']})"
+
+    rows = ["| class | mesh | view | `auto` chose | default: max error (px > 1/255) | tet marching | projected tetrahedra |",
+            "|---|---|---:|---|---:|---:|---:|"]
+    for row in r["rows"]:
+        chose = "tet marching" if row["auto_chose"] == "raymarch" else "projected tetrahedra, warns"
+        rows.append(f"| {row['class']} | {row['mesh']} | {row['view']} | {chose} | {cell(row['auto'])} "
+                    f"| {cell(row['raymarch'])} | {cell(row['projected'])} |")
+    size = "x".join(str(x) for x in r["size"])
+    return (f"Largest per-pixel error (RGBA) against `method=\"reference\"` at {size}, and in brackets the "
+            f"pixels beyond 1/255; \"refused\": `method=\"raymarch\"` raised its error "
+            f"({r['date']}, `bench/results/imperfect.json`, by `bench/imperfect.py`).\n\n" + "\n".join(rows))
+
+
+TABLES: dict[str, Callable[[], str]] = {"imperfect_meshes": imperfect_meshes, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
                                         "compare_demo": compare_demo,
                                         "viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages,
                                         "volume_accuracy": volume_accuracy,

@@ -351,8 +351,14 @@ def main(argv=None) -> int:
                 warnings.simplefilter("ignore")
                 c = case(name)
             ref = render_reference(c.mesh, c.camera, c.tf, (96, 96))
-            report["stability"][name] = {
-                key: errors(renderers[key].render(c.mesh, c.camera, c.tf, size=(96, 96)), ref) for key in vs}
+            report["stability"][name] = {}
+            for key in vs:
+                try:
+                    image = renderers[key].render(c.mesh, c.camera, c.tf, size=(96, 96))
+                except ValueError as exc:  # tet marching refuses a mesh it cannot walk (tangled slivers)
+                    report["stability"][name][key] = {"psnr": None, "refused": str(exc)}
+                    continue
+                report["stability"][name][key] = errors(image, ref)
     except KeyboardInterrupt:
         print("interrupted: writing what was measured")
     finally:

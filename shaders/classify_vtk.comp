@@ -5,7 +5,7 @@
 // image is ParaView's "Projected tetra" picture. Compiled only for optics="vtk"; the
 // default path's classify.comp does not contain any of this. What VTK does, and so this:
 //   * colour and opacity are classified at the vertices (VertexColors: RGBA8, truncated
-//     as VTK truncates, tetvr.optics.vtk_vertex_rgba8) and interpolated, not the scalar;
+//     as VTK truncates, tetvr.optics.model.vtk_vertex_rgba8) and interpolated, not the scalar;
 //   * the two opposite edges are chosen by the signs of three face orientations at
 //     vertex 0; where their projections cross (parameter alpha on the first, beta on the
 //     second) the tet is class 2, else class 1 with the first edge's far end thick;

@@ -5,7 +5,7 @@
 // a trilinear fetch then reads nearby memory; tetvr.gl.util.table_texture), linear
 // filtering (TABLE_CUBIC 1: Catmull-Rom across slices instead). TABLE_NORMALIZED 1: RGB = colour per unit alpha, A = mean extinction, so
 // alpha = 1 - exp(-d A) is exact in d; 0: premultiplied RGBA (Kraus et al. 2004).
-// TABLE_WARP 1: the scalar nodes are uneven (tetvr.tablewarp): table_st gives x, the cells
+// TABLE_WARP 1: the scalar nodes are uneven (tetvr.optics.tablewarp): table_st gives x, the cells
 // from the first node, and u_warp (u_warp_cells x 3, RGBA32F, no filtering) the node index
 // (row 0) and, for TABLE_NORMALIZED, the mean extinction from the optical depth per cell
 // (row 1) or the opacity per node (row 2) instead of the table's A, which cannot follow

@@ -18,14 +18,21 @@
 // from the faces the first entry pass listed for the pixel (march_entry.frag: by the peel's
 // rule, the nearest not before where the ray left, less a rounding, nor the face it entered
 // by; ties to the lower slot), leaves it in f_last and counts the pixel in u_more; the next
-// pass starts there. (tetvr.gl.raymarch uses the list where no pixel's overflowed.)
+// pass starts there. (tetvr.gl.raymarch uses the list where no pixel's overflowed.) The
+// boundary faces beside the one it left by are candidates too (u_neighbors, tested as the
+// walk sees them): the rasteriser may leave out a face the ray enters within a snapping step
+// of its edge, and beside a fold of the surface that face is where the ray goes on.
+// JUMPS 1: the point field jumps at some faces (duplicated nodes whose copies carry other values,
+// link.w): crossing one, the walk takes the scalars of the tet it enters.
+// MULTIPLICITY 1: the mesh repeats cells (tetvr.mesh.copies keeps each once, u_copies says how
+// many times): a tet's segment is composited once per copy.
 // Defines: CELL_DATA 1 (the records' scalars are cell constants: g = (0, c), and the scalar
 // is not carried across faces), FIRST (the first layer), EXTENT 1 (instead of colour, f_color = (eye depth of
 // the first entry, of the last exit, segments walked, 0): the ray limits for fusion with a
 // volume, and the segment count the benchmarks divide by; no table lookups).
 // The walk: the first tet (where the ray enters, or starts at the near plane) is left by
 // the nearest of its face planes the ray points out of. From then on, by points (Marmitt &
-// Slusallek 2006; tetvr.marching): the ray holds the triangle it came in by, seen in the
+// Slusallek 2006; tetvr.mesh.records): the ray holds the triangle it came in by, seen in the
 // plane across the ray about the ray's origin; the signs of three 2D cross products with
 // the tet's fourth point choose the face it leaves by, and the same products weigh the
 // exit's t and scalar. A step reads one link (the next tet, its face, the point across
@@ -84,13 +91,29 @@ vec4 segment(float s0, float s1, float len) {
 #if LIST
 layout(binding = COUNT_IMAGE, r32ui) restrict readonly uniform uimage2D u_count;
 layout(binding = LIST_IMAGE, rg32i) restrict readonly uniform iimage2D u_list;
+// Each boundary face's neighbours on the boundary (slots 4 * tet + k, -1 after the last).
+layout(binding = NEIGHBORS_IMAGE, rgba32i) restrict readonly uniform iimage2D u_neighbors;
 layout(std430, binding = MORE_BUFFER) restrict buffer More { uint u_more; };
 uniform float u_tolerance;
 #endif
+// Where a ray leaves the mesh within this fraction of its face's weights of one of the
+// face's edges, the boundary faces beside it are tested for an entry (LIST, below): seen
+// across the ray, the ray is as close to them as to that edge; elsewhere the rasteriser
+// listed any face the ray enters beside it, and every ray's last exit would pay for the test.
+#define NEAR_EDGE 0.02
 uniform int u_max_steps;      // bound on tets per ray and layer (a walk caught by rounding)
 // Most tets a ray walks by face planes before it walks by points (see main).
 #define PLANE_STEPS 8
 uniform float u_opaque;       // stop once alpha reaches this (early ray termination)
+
+#if MULTIPLICITY
+// Each tet's number of copies (x): the mesh repeats cells, which tetvr.mesh.copies keeps once.
+layout(binding = COPIES_IMAGE, rgba32i) restrict readonly uniform iimage2D u_copies;
+int g_copies = 1;
+#define COPIES_OF(t) g_copies = imageLoad(u_copies, ivec2((t) & ((1 << ITEMS_ROW_SHIFT) - 1), (t) >> ITEMS_ROW_SHIFT)).x
+#else
+#define COPIES_OF(t)
+#endif
 
 layout(location = 0) out vec4 f_color;
 layout(location = 1) out vec2 f_state;
@@ -124,7 +147,14 @@ bool composite(inout vec4 acc, float t_in, float s_in, inout float t_out, inout 
     acc.z += 1.0;
     return at_far;
 #else
-    if (shown) acc += (1.0 - acc.a) * segment(s_a, s_out, (t_out - t_a) * per_t);
+    if (shown) {
+        vec4 seg = segment(s_a, s_out, (t_out - t_a) * per_t);
+#if MULTIPLICITY
+        // A cell the mesh holds several times: composited once per copy, as the reference does.
+        for (int i = 1; i < g_copies; ++i) acc += (1.0 - acc.a) * seg;
+#endif
+        acc += (1.0 - acc.a) * seg;
+    }
     return at_far || acc.a >= u_opaque;
 #endif
 }
@@ -138,6 +168,25 @@ vec3 across(vec3 r, vec3 e1, vec3 e2, vec3 d, float inv_dd) {
 // e(p, q): the turn from p to q about the origin of the plane across the ray.
 float cross2(vec2 p, vec2 q) {
     return p.x * q.y - p.y * q.x;
+}
+
+// Whether the ray enters the mesh through boundary face s (slot 4 * tet + k), and where: its
+// plane faces the ray and the ray, seen across it, passes inside its triangle -- decided with
+// the points as the walk sees them (across), so that for an edge the face shares with the
+// one the ray left by, the two decisions are made on the same numbers.
+bool enters(int s, vec3 o, vec3 d, vec3 ow, vec3 e1, vec3 e2, float inv_dd, out float t) {
+    int tet = s >> 2, k = s & 3;
+    vec4 plane = face_plane(tet, k);
+    float den = dot(plane.xyz, d);
+    t = 0.0;
+    if (den >= 0.0) return false;  // faces away: rays leave the mesh there
+    t = -(dot(plane.xyz, o) + plane.w) / den;
+    ivec4 ids = tet_ids(tet);
+    vec2 a = across(point_record(ids[(k + 1) & 3]).xyz - ow, e1, e2, d, inv_dd).xy;
+    vec2 b = across(point_record(ids[(k + 2) & 3]).xyz - ow, e1, e2, d, inv_dd).xy;
+    vec2 c = across(point_record(ids[(k + 3) & 3]).xyz - ow, e1, e2, d, inv_dd).xy;
+    vec3 E = vec3(cross2(b, c), cross2(c, a), cross2(a, b));
+    return (min(E.x, min(E.y, E.z)) >= 0.0 || max(E.x, max(E.y, E.z)) <= 0.0) && E != vec3(0.0);
 }
 
 // The slot in the next tet of the point in slot s of this one, the ray going from face k
@@ -224,6 +273,7 @@ void main() {
 #if EXTENT && !RAY_WINDOW
     acc.x = min(acc.x, t_in);
 #endif
+    COPIES_OF(tet);
 
     // The walk by points (Marmitt & Slusallek 2006) sees the points in the plane across the
     // ray, the ray at its origin: the face the ray came in by is a triangle (a, b, c)
@@ -252,6 +302,7 @@ void main() {
     float t_out = t_in, s_out = s_in;
     float status = STATUS_DONE;
     bool by_points = false;
+    bool near_edge = true;  // where the ray left the mesh: beside an edge of that face (see LIST below)
     ivec4 link;
     int k = 0;
     for (int step = 0; step < PLANE_STEPS && step < u_max_steps; ++step) {
@@ -300,13 +351,19 @@ void main() {
             break;
         }
         tet = link.x >> 2;
+        COPIES_OF(tet);
         face = link.x & 3;
         t_in = t_out;
         g = tet_scalar(tet);
 #if CELL_DATA
         s_in = g.w;
 #else
+#if JUMPS
+        // Duplicated nodes whose copies differ (link.w): the field jumps, take this tet's.
+        s_in = link.w != 0 ? dot(g.xyz, o + t_in * d) + g.w : s_out;
+#else
         s_in = s_out;
+#endif
 #endif
     }
     if (by_points) {
@@ -318,11 +375,23 @@ void main() {
             sb = next_slot(sb, k, f);
             sc = next_slot(sc, k, f);
             tet = link.x >> 2;
+            COPIES_OF(tet);
             t_in = t_out;
 #if CELL_DATA
             s_in = intBitsToFloat(link.z);  // the field jumps at the face: each cell's own constant
 #else
             s_in = s_out;
+#if JUMPS
+            if (link.w != 0) {
+                // Duplicated nodes whose copies differ: the field jumps at the face, so the
+                // triangle's scalars and the entry's are this tet's copies (same weights).
+                ivec4 ids = tet_ids(tet);
+                ss = vec3(point_record(ids[sa]).w, point_record(ids[sb]).w, point_record(ids[sc]).w);
+                vec3 w = max(E, 0.0);
+                float sum = w.x + w.y + w.z;
+                s_in = sum > 0.0 ? dot(w, ss) / sum : ss.x;
+            }
+#endif
 #endif
             vec4 qn = point_record(link.y);  // the point across face f
             vec3 n = across(qn.xyz - ow, e1, e2, d, inv_dd);
@@ -355,6 +424,8 @@ void main() {
             link = tet_link(tet, k);
             if (link.x < 0) {
                 status = STATUS_REENTER;
+                // Its place on the face it leaves by, from the weights of that face's points.
+                near_edge = min(w.x, min(w.y, w.z)) <= NEAR_EDGE * sum;
                 break;
             }
         }
@@ -374,13 +445,31 @@ void main() {
         uint n = min(imageLoad(u_count, px).x, uint(LIST_LENGTH));
         float t_min = t_out - u_tolerance * per_t;  // as march_entry.frag's peel
         float t_next = 3.0e38;
-        for (uint i = 0u; i < n; ++i) {
-            ivec2 e = imageLoad(u_list, ivec2(px.x, px.y + int(i) * int(u_viewport.y))).xy;
-            float t = intBitsToFloat(e.x);
-            bool nearer = t < t_next || (t == t_next && e.y < f_last);
-            if (e.y != entry && t >= t_min && nearer) {
+        // A loop over all LIST_LENGTH slots, not up to n: with the count varying between
+        // the pixels a shader invocation runs together, llvmpipe (Mesa 22) ended a loop
+        // bounded by n after the first pixel's count, and a ray lost the entry it re-enters by.
+        for (int i = 0; i < LIST_LENGTH; ++i) {
+            if (uint(i) < n) {
+                ivec2 e = imageLoad(u_list, ivec2(px.x, px.y + i * int(u_viewport.y))).xy;
+                float t = intBitsToFloat(e.x);
+                bool nearer = t < t_next || (t == t_next && e.y < f_last);
+                if (e.y != entry && t >= t_min && nearer) {
+                    t_next = t;
+                    f_last = e.y;
+                }
+            }
+        }
+        // The faces beside the one it left by: where the ray leaves beside a fold of the
+        // surface and enters again at once, the rasteriser may not have listed the face it
+        // enters by for this pixel (its hit within a snapping step of the face's edge).
+        ivec4 nb = near_edge ? imageLoad(u_neighbors, ivec2(link.y & ((1 << ITEMS_ROW_SHIFT) - 1),
+                                                            link.y >> ITEMS_ROW_SHIFT)) : ivec4(-1);
+        for (int i = 0; i < 4 && nb[i] >= 0; ++i) {
+            float t;
+            if (nb[i] != entry && enters(nb[i], o, d, ow, e1, e2, inv_dd, t) && t >= t_min
+                    && (t < t_next || (t == t_next && nb[i] < f_last))) {
                 t_next = t;
-                f_last = e.y;
+                f_last = nb[i];
             }
         }
         if (f_last >= 0) atomicAdd(u_more, 1u);

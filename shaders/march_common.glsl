@@ -1,5 +1,5 @@
 // march_common.glsl -- what the tet-marching ray caster's passes share: the per-tet
-// records (tetvr/marching.py) read with imageLoad, and each pixel's ray.
+// records (tetvr/mesh/records.py) read with imageLoad, and each pixel's ray.
 //
 // Coordinate spaces: *_obj mesh coordinates relative to the mesh's bounding-box centre (as
 // the records), eye space as in common.glsl. Ray parameter t = eye depth along the view axis
@@ -8,9 +8,10 @@
 // Records (images, bound read-only to units PLANES_IMAGE ... POINTS_IMAGE): u_planes (RGBA32F) holds RECORD_TEXELS texels per tet, 2^TETS_ROW_SHIFT tets a row:
 // texels 0..3 the face planes (n, w), n . x_obj + w < 0 inside, n the outward unit normal;
 // texel 4 the scalar (g, c), s = g . x_obj + c. Slot k of a tet is its k-th point in
-// increasing id, face k the face opposite it. u_links (RGBA32I), four texels a tet,
+// increasing welded id (points at the same coordinates count as one), face k the face opposite it. u_links (RGBA32I), four texels a tet,
 // 2^LINKS_ROW_SHIFT tets a row: across face k, (4 * neighbour + its face there, -1 on the
-// boundary; the neighbour's point opposite that face; its cell scalar's float bits).
+// boundary; the neighbour's point opposite that face; its cell scalar's float bits; 1 where
+// the point field jumps at the face: duplicated nodes whose copies carry other values).
 // u_ids (RGBA32I) the tets' point ids and u_points (RGBA32F) the points (position relative
 // to the eye, written per view; scalar), 2^ITEMS_ROW_SHIFT a row.
 // Defines: PERSPECTIVE, TETS_ROW_SHIFT, LINKS_ROW_SHIFT, ITEMS_ROW_SHIFT (powers of two:

@@ -8,7 +8,7 @@
 // t lies in the clipping range and, when PEEL is 1 (a later layer of a non-convex mesh), if
 // the ray left the mesh in the last march pass and t is not before where it left (minus a
 // rounding tolerance) nor the face it entered by last. RIM 1: as NEAR_CELLS 0 for a face
-// drawn as a rectangle round its projection (tetvr.marching.rim_faces), whose fragments
+// drawn as a rectangle round its projection (tetvr.mesh.records.rim_faces), whose fragments
 // are kept only where the pixel's ray, in float64, enters the triangle v_c0..2 (wound
 // counter-clockwise seen from outside; Moller-Trumbore, closed, as the reference decides).
 // LIST 1 (the first layer's faces, not PEEL): every face that passes is also listed for the

@@ -1,7 +1,7 @@
 #version 430
 // march_entry.vert -- where rays enter the mesh: its boundary faces (NEAR_CELLS 0), the
 // screen rectangles of the cells the near plane cuts (NEAR_CELLS 1), or those of the boundary
-// faces next to faces seen edge-on (RIM 1; tetvr.marching.rim_faces).
+// faces next to faces seen edge-on (RIM 1; tetvr.mesh.records.rim_faces).
 //
 // In:  in_pos: a boundary face corner (obj) or a rectangle corner (NDC); in_id: the face's
 //      slot 4 * tet + k, or the cut tet's id; RIM 1: in_c0..2, the face's corners (obj, float64).

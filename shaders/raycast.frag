@@ -47,7 +47,7 @@ uniform int u_use_limits;
 uniform sampler2D u_limits;      // RG: t_start, t_end per pixel (row 0 at the bottom)
 uniform float u_step;            // world units
 uniform int u_max_steps;
-uniform float u_termination;     // stop once alpha >= this
+uniform float u_termination_tolerance;  // stop once 1 - alpha <= this (0: never early)
 uniform int u_jitter;
 uniform uint u_seed;
 uniform float u_iso;
@@ -166,7 +166,9 @@ void main() {
         vec4 piece = lookup_segment(s_prev, s_next, (off_next - off_prev) * world_per_t);
 #endif
         acc += (1.0 - acc.a) * piece;
-        if (acc.a >= u_termination) break;
+        // Early ray termination as an error bound: colours are <= 1, so the rest of the ray
+        // could add at most 1 - alpha to any channel (tetvr.reference.volume stops alike).
+        if (1.0 - acc.a <= u_termination_tolerance) break;
 #elif RAYCAST_MODE == 1
         s_max = max(s_max, s_next);
 #elif RAYCAST_MODE == 2

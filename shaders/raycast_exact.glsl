@@ -2,7 +2,7 @@
 // table: the piece is cut where its scalar crosses a transfer-function control point, so
 // that colour and opacity are linear on every cut, and each cut is integrated in closed
 // form (optical depth) and by 3-point Gauss-Legendre quadrature (colour), as
-// tetvr.optics.integrate_pieces does in float64 (the same exact model, tau = -ln(1 - a) / u).
+// tetvr.optics.model.integrate_pieces does in float64 (the same exact model, tau = -ln(1 - a) / u).
 //
 // In:  raycast_sample.glsl's transfer function (tf_interval, tf_point: its control points);
 //      u_inv_unit_distance: 1 / the transfer function's unit distance.
@@ -16,7 +16,7 @@ uniform float u_inv_unit_distance;
 #define SUB_THETA 0.5
 #define MAX_PARTS 16
 
-// The bracket of tetvr.optics.mean_neg_log: mean of -ln x over [x0, x0 (1 + d)] is
+// The bracket of tetvr.optics.model.mean_neg_log: mean of -ln x over [x0, x0 (1 + d)] is
 // -ln x0 - bracket(d); by its series where float32 would cancel (to d^7: < 2e-10 for |d| < 0.1).
 float bracket(float d) {
     return abs(d) < 0.1
@@ -36,7 +36,7 @@ float one_minus_exp(float t) {
 // One part, colour linear from c0 to c1 and transmittance per unit distance 1 - a from
 // x0 to x1, k = its length / unit distance, theta = its optical depth (k mean_neg_log).
 // I = c0 (1 - T(L)) + (c1 - c0) int_0^1 (T(xi) - T(L)) dxi, the colour integral by parts
-// (tetvr.optics.integrate_pieces) written so that no two O(1) terms cancel when the part
+// (tetvr.optics.model.integrate_pieces) written so that no two O(1) terms cancel when the part
 // is faint; with constant opacity the integral is closed form, else 3-point
 // Gauss-Legendre (the part's optical depth is at most SUB_THETA and its 1 - a within
 // 2x: the error is below float32's).

@@ -1,6 +1,6 @@
 #version 430
 // surface.frag -- the pixel's ray against one triangle of the opaque surfaces, exactly
-// (Moller-Trumbore, as tetvr.surface.moller_trumbore), lit by a headlight.
+// (Moller-Trumbore, as tetvr.core.surface.moller_trumbore), lit by a headlight.
 //
 // In:  flat v_tri; SurfaceTriangles (surface.vert); u_view (obj -> eye), u_ray_scale,
 //      u_viewport, u_near, u_far.

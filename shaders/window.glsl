@@ -1,11 +1,11 @@
 // window.glsl -- the part of a pixel's ray that is kept: the clipping range, cut by clip
-// planes (tetvr/clip.py) and by a per-pixel limit (an opaque surface's depth).
+// planes (tetvr/core/clip.py) and by a per-pixel limit (an opaque surface's depth).
 //
 // Coordinate space: eye space; t is eye depth. A perspective ray is x = t (r, -1), a
 // parallel one x = (r, 0) + t (0, 0, -1), r as tet.vert's v_ray.
 // Defines: PERSPECTIVE; CLIP_PLANES k > 0 (u_clip: k planes n . x + w >= 0 kept, eye
 // space); RAY_LIMIT 1 (u_limit: R32F, per pixel the eye depth where rays stop, 3e38 none).
-// Same arithmetic as tetvr.clip.ray_window.
+// Same arithmetic as tetvr.core.clip.ray_window.
 
 #ifndef CLIP_PLANES
 #define CLIP_PLANES 0

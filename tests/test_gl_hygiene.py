@@ -10,7 +10,7 @@ import pytest
 from tetvr import Camera, RenderSettings
 from tetvr.mesh import synthetic
 from tetvr.gl import Renderer
-from tetvr.gl.raymarch import _Layout
+from tetvr.gl.march_layout import Layout
 from tetvr.render import default_transfer_function
 
 pytestmark = pytest.mark.gl
@@ -35,7 +35,11 @@ def test_every_shader_variant_compiles():
             if exact and extent:
                 continue
             r._program("march", PERSPECTIVE=persp, CELL_DATA=0, FIRST=1, TABLE_NORMALIZED=1, EXTENT=extent,
-                       INTEGRATION_EXACT=exact, CLIP_PLANES=clip, RAY_LIMIT=limit, **_Layout.of(16384).defines)
+                       INTEGRATION_EXACT=exact, CLIP_PLANES=clip, RAY_LIMIT=limit, **Layout.of(16384).defines)
+        # Cell data, repeated cells, a point field that jumps at faces, the entry list.
+        for cells, copies, jumps, listed in itertools.product((0, 1), (0, 1), (0, 1), (0, 1)):
+            r._program("march", PERSPECTIVE=1, CELL_DATA=cells, MULTIPLICITY=copies, JUMPS=jumps, FIRST=0,
+                       LIST=listed, LIST_LENGTH=8, TABLE_NORMALIZED=1, EXTENT=0, **Layout.of(16384).defines)
         for persp in (0, 1):
             r._program("surface", PERSPECTIVE=persp)
         assert r.ctx.error == "GL_NO_ERROR"
@@ -133,14 +137,15 @@ def test_gpu_bytes_counts_what_the_renderer_holds():
         r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(16, 8))
         # records, each one row of a power of two of items: the planes (at most 4096 tets, 5
         # RGBA32F texels each), the links (at most 4096 tets, 4 RGBA32I texels each), the ids
-        # (RGBA32I) and the points (RGBA32F), 8192 a row; boundary faces (3 corners: 3 floats +
-        # 1 int), table, targets (entry id + depth, and two sets of colour, state and last entry)
+        # (RGBA32I), the points (RGBA32F) and the boundary faces' neighbours (RGBA32I), 8192 a
+        # row; boundary faces (3 corners: 3 floats + 1 int), table, targets (entry id + depth,
+        # and two sets of colour, state and last entry)
         n_faces = 6 * 4 * 2  # two triangles on each of a 2x2 grid of squares per cube side
         max_tex = r.ctx.info["GL_MAX_TEXTURE_SIZE"]
         tets_per_row = min(1 << ((max_tex // 5).bit_length() - 1), 4096)
         links_per_row = min(1 << ((max_tex // 4).bit_length() - 1), 4096)
         assert tets_per_row & (tets_per_row - 1) == 0 and tets_per_row * 5 <= max_tex
-        expected = (tets_per_row * 5 * 16 + links_per_row * 4 * 16 + 2 * 8192 * 16 + n_faces * 3 * 16 + table
+        expected = (tets_per_row * 5 * 16 + links_per_row * 4 * 16 + 3 * 8192 * 16 + n_faces * 3 * 16 + table
                     + 16 * 8 * (4 + 4 + 2 * (16 + 8 + 4)))
         assert r.gpu_bytes() == expected
 

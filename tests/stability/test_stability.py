@@ -24,6 +24,7 @@ import pytest
 
 from tetvr.core.image import psnr
 from tetvr.order.method import choose
+from tetvr.order.walkable import walk_check
 from tetvr.reference.tets import render_reference
 from tetvr.scene.stability import CASES, case
 
@@ -54,14 +55,13 @@ def test_case_against_reference(renderer, name):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # dropped zero-volume tets are reported, not errors
         c = case(name)
-    from tetvr.mesh.records import folded_faces
-
-    if renderer.settings.method == "raymarch" and folded_faces(c.mesh):
-        # A tangled mesh (overlapping cells): tet marching says it cannot follow it, and
+    if renderer.settings.method == "raymarch" and not walk_check(c.mesh).walkable:
+        # A tangled mesh (overlapping cells): tet marching refuses it, saying why, and
         # method="auto" renders it by projected tetrahedra (the other parameter of this test).
-        with pytest.warns(RuntimeWarning, match="tangled"):
+        with pytest.raises(ValueError, match="folded"):
             renderer.render(c.mesh, c.camera, c.tf, size=SIZE)
-        assert choose(dataclasses.replace(renderer.settings, method="auto"), c.mesh) == "projected"
+        with pytest.warns(UserWarning, match="folded"):
+            assert choose(dataclasses.replace(renderer.settings, method="auto"), c.mesh) == "projected"
         return
     got = renderer.render(c.mesh, c.camera, c.tf, size=SIZE)
     assert np.all(np.isfinite(got)), f"{name}: NaN/Inf in the image"

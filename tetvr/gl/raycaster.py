@@ -126,7 +126,7 @@ class Raycaster(GLOwner):
 
     Parameters
     ----------
-    settings : mode, step, termination, jitter, iso value, clip box, table sizes.
+    settings : mode, step, termination tolerance, jitter, iso value, clip box, table sizes.
     ctx : a moderngl context to draw in (e.g. the tets :class:`~tetvr.gl.Renderer`'s
         ``ctx``); it is borrowed, not released. ``None`` creates and owns one.
     max_texture_size : largest 3D texture side to use (default: the GPU's limit).
@@ -450,7 +450,7 @@ class Raycaster(GLOwner):
             u_box_hi=tuple(float(n - 1) for n in gpu.dims), u_clip_range=camera.clipping_range,
             u_use_clip_box=int(s.clip_box is not None), u_clip_lo=tuple(clip_lo), u_clip_hi=tuple(clip_hi),
             u_use_limits=int(use_limits), u_step=step, u_max_steps=max_steps,
-            u_termination=s.termination, u_jitter=int(s.jitter), u_seed=s.seed,
+            u_termination_tolerance=s.termination_tolerance, u_jitter=int(s.jitter), u_seed=s.seed,
             u_iso=s.iso_for(volume), u_iso_opacity=s.iso_opacity, u_shading=s.shading,
             u_gradient_to_local=a_inv.T,
             u_inv_dims=tuple(1.0 / n for n in gpu.dims), u_value_scale=self._value_scale,

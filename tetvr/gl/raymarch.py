@@ -40,7 +40,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tetvr.core.camera import Camera
-from tetvr.mesh.records import RECORD_TEXELS, MarchRecords, folded_faces, march_records, near_plane_cells, rim_faces
+from tetvr.gl.march_layout import (NEIGHBORS_IMAGE, COPIES_IMAGE, COUNT_IMAGE, IDS_IMAGE, LINKS_IMAGE, LIST_IMAGE, LIST_LENGTH,
+                                   LIST_MAX_BYTES, MORE_BUFFER, NEAREST, OVERFLOW_BUFFER, PLANES_IMAGE, POINTS_IMAGE, Layout, Rim,
+                                   raymarch_capacity, rect_triangles)
+from tetvr.mesh.records import RECORD_TEXELS, MarchRecords, march_records, near_plane_cells, rim_faces
+from tetvr.mesh.copies import DistinctCells, distinct_cells
+from tetvr.order.walkable import walk_check
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.gl.host import ProgramHost
 
@@ -56,99 +61,19 @@ MAX_LAYERS = 64
 OPAQUE_REMAINDER = 2.0**-20
 
 
-#: GL_NEAREST: records and targets are read with texelFetch, never filtered (the value of
-#: moderngl.NEAREST, written here so that importing this module imports no moderngl).
-_NEAREST = 0x2600
-
-
-#: Image units of the walk's records, read with imageLoad (march_common.glsl): on llvmpipe
-#: an imageLoad costs less than a texelFetch (no sampler state, no level), and the walk
-#: measured 11-12 % faster on bluntfin at 512x512, images bit-identical. Units 0-3: GL 4.3
-#: guarantees 8 image units to a fragment shader.
-PLANES_IMAGE, IDS_IMAGE, LINKS_IMAGE, POINTS_IMAGE = 0, 1, 2, 3
-#: Image units of the first layer's entry list (march_entry.frag, LIST): each pixel's count
-#: of faces, and the faces; storage-buffer bindings of the pixels that overflowed it and of
-#: those that go on to another layer (march.frag, LIST).
-COUNT_IMAGE, LIST_IMAGE, OVERFLOW_BUFFER, MORE_BUFFER = 4, 5, 0, 1
-#: Faces listed per pixel: a pixel whose ray meets more front faces than this (in its
-#: clipping range) overflows the list, and that frame peels instead. With the list, the
-#: march passes pick each further entry themselves: no peel pass rasterises the boundary
-#: again, and none runs to find that no ray enters again.
-LIST_LENGTH = 8
-#: Most bytes the list may hold (its count and LIST_LENGTH faces a pixel, 68 B): a larger
-#: frame (above about 1400x1400) peels instead.
-LIST_MAX_BYTES = 128 << 20
-
 #: One background thread builds a new mesh's face adjacency and records while the
 #: renderer builds the frame's table (both numpy, which lets go of the GIL in its loops):
 #: the first frame overlaps the two instead of adding them.
 _PREFETCH = ThreadPoolExecutor(max_workers=1, thread_name_prefix="tetvr-records")
 
 
-def _records(mesh: TetMesh) -> tuple[MarchRecords, int]:
-    """The records of ``mesh`` and its folded faces (:func:`~tetvr.mesh.records.folded_faces`)."""
-    folds = folded_faces(mesh)
-    return march_records(mesh), folds
-
-
-@dataclasses.dataclass(frozen=True)
-class _Layout:
-    """Items per row of each records texture: powers of two, so that the shaders find an
-    item's row and column by a shift and a mask (llvmpipe has no vector integer division:
-    ``i / n`` with n a uniform costs one scalar division per lane; at 512x512 the walk
-    measured 17 % faster on bluntfin, 41 % on combustor)."""
-
-    planes: int  # tets a row of the planes texture (RECORD_TEXELS texels a tet)
-    links: int   # tets a row of the links texture (four texels a tet)
-    items: int   # tets a row of the ids texture, points a row of the points texture
-
-    @classmethod
-    def of(cls, max_texture_size: int) -> "_Layout":
-        def pow2(n: int) -> int:
-            return 1 << max(0, n.bit_length() - 1)
-
-        return cls(min(pow2(max_texture_size // RECORD_TEXELS), 4096), min(pow2(max_texture_size // 4), 4096),
-                   min(pow2(max_texture_size), 8192))
-
-    def capacity(self, max_texture_size: int) -> int:
-        """The most tets (and points) the textures hold."""
-        return min(self.planes, self.links, self.items) * max_texture_size
-
-    @property
-    def defines(self) -> dict[str, int]:
-        return dict(TETS_ROW_SHIFT=self.planes.bit_length() - 1, LINKS_ROW_SHIFT=self.links.bit_length() - 1,
-                    ITEMS_ROW_SHIFT=self.items.bit_length() - 1, PLANES_IMAGE=PLANES_IMAGE, IDS_IMAGE=IDS_IMAGE,
-                    LINKS_IMAGE=LINKS_IMAGE, POINTS_IMAGE=POINTS_IMAGE, COUNT_IMAGE=COUNT_IMAGE,
-                    LIST_IMAGE=LIST_IMAGE, OVERFLOW_BUFFER=OVERFLOW_BUFFER, MORE_BUFFER=MORE_BUFFER)
-
-
-def _rect_triangles(rects: NDArray[np.float64]) -> NDArray[np.float32]:
-    """NDC rectangles (x_lo, y_lo, x_hi, y_hi) as two counter-clockwise triangles each:
-    (n, 6, 2) corners."""
-    return rects[:, [[0, 1], [2, 1], [2, 3], [0, 1], [2, 3], [0, 3]]].astype(np.float32)
-
-
-def raymarch_capacity(max_texture_size: int) -> int:
-    """The most tets whose records fit one texture of a GL with this GL_MAX_TEXTURE_SIZE."""
-    return _Layout.of(max_texture_size).capacity(max_texture_size)
-
-
-@dataclasses.dataclass(frozen=True)
-class _Rim:
-    """One view's :func:`~tetvr.mesh.records.rim_faces` on the GL: vertex buffers of the
-    rectangles (6 corners a face), of each face's corners in float64 and of its slot, and an
-    index buffer of the boundary faces the rasteriser draws (``n_drawn`` indices)."""
-
-    rects: Any
-    corners: Any
-    slots: Any
-    drawn: Any
-    n_faces: int
-    n_drawn: int
-
-    def release(self) -> None:
-        for b in (self.rects, self.corners, self.slots, self.drawn):
-            b.release()
+def _records(mesh: TetMesh) -> tuple[DistinctCells, MarchRecords]:
+    """The mesh the walk goes through (each repeated cell once, :mod:`tetvr.mesh.copies`) and
+    its records; and what :func:`~tetvr.order.method.choose` checks of the mesh
+    (:func:`~tetvr.order.walkable.walk_check`), all cached with the mesh."""
+    walk_check(mesh)
+    distinct = distinct_cells(mesh)
+    return distinct, march_records(distinct.mesh)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -173,7 +98,9 @@ class Marcher:
     def __init__(self, owner: ProgramHost) -> None:
         self.owner = owner
         self.ctx = owner.ctx
-        self._mesh: TetMesh | None = None
+        self._mesh: TetMesh | None = None  # the mesh given, and the one walked (each repeated cell once)
+        self._walked: TetMesh | None = None
+        self._jumps = False
         self._records: MarchRecords | None = None
         self._textures: dict[int, Any] = {}  # image unit -> records texture
         self._faces: list[Any] = []  # boundary positions, slots
@@ -181,7 +108,7 @@ class Marcher:
         self._targets: dict[tuple[int, int], dict[str, Any]] = {}
         self._query: Any = None
         self._counters: list[Any] = []  # the overflow and more counters (LIST)
-        self._prefetch: tuple[TetMesh, Future[tuple[MarchRecords, int]]] | None = None
+        self._prefetch: tuple[TetMesh, Future[tuple[DistinctCells, MarchRecords]]] | None = None
         self._shifts: dict[str, int] = {}
         self._points: NDArray[np.float32] = np.zeros((0, 4), dtype=np.float32)
         self._points_eye: NDArray[np.float64] | None = None
@@ -199,7 +126,7 @@ class Marcher:
         self._textures, self._faces, self._counters = {}, [], []
         self._targets.clear()
         self._query = None
-        self._mesh = self._records = None
+        self._mesh = self._walked = self._records = None
         self._prefetch = None
 
     def gpu_bytes(self) -> int:
@@ -227,34 +154,32 @@ class Marcher:
             if not keep:
                 self._prefetch = None
 
-    def _use_mesh(self, mesh: TetMesh) -> MarchRecords:
+    def _use_mesh(self, mesh: TetMesh) -> tuple[TetMesh, MarchRecords]:
+        """The mesh the walk goes through (``mesh`` with each repeated cell once) and its
+        records, on the GL."""
         if mesh is self._mesh and self._records is not None:
-            return self._records
+            assert self._walked is not None
+            return self._walked, self._records
         for obj in [*self._vaos.values(), *self._textures.values(), *self._faces]:
             obj.release()
         self._vaos.clear()
         pending, self._prefetch = self._prefetch, None
-        rec, folds = pending[1].result() if pending is not None and pending[0] is mesh else _records(mesh)
-        if folds:
-            from tetvr.core.checks import warn
-
-            warn(f"the mesh is tangled: {folds} interior faces have both their cells on one side (cells "
-                 f"overlap in space); tet marching follows faces and renders it wrong: use "
-                 f"method=\"projected\" (\"auto\" does)", RuntimeWarning)
+        distinct, rec = pending[1].result() if pending is not None and pending[0] is mesh else _records(mesh)
+        given, mesh = mesh, distinct.mesh
         max_tex = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
         if max(mesh.n_tets, mesh.n_points) > raymarch_capacity(max_tex):
             raise MemoryError(f"the ray caster holds at most {raymarch_capacity(max_tex)} tets and points in one texture "
                               f"on this GL (GL_MAX_TEXTURE_SIZE {max_tex}); the mesh has {mesh.n_tets} tets, "
                               f"{mesh.n_points} points: use "
                               f"method=\"projected\" or split it into bricks (tetvr.order.cull.submesh)")
-        layout = _Layout.of(max_tex)
+        layout = Layout.of(max_tex)
 
         def texture(items: NDArray[Any], per_row: int, texels: int, fill: float) -> Any:
             rows = -(-items.shape[0] // per_row)
             data = np.full((rows * per_row, *items.shape[1:]), fill, dtype=items.dtype)
             data[:items.shape[0]] = items
             tex = self.ctx.texture((per_row * texels, rows), 4, data.tobytes(), dtype=items.dtype.str[1:])
-            tex.filter = (_NEAREST, _NEAREST)
+            tex.filter = (NEAREST, NEAREST)
             return tex
 
         planes = np.concatenate([rec.planes, rec.scalar[:, None]], axis=1)  # RECORD_TEXELS texels a tet
@@ -266,12 +191,18 @@ class Marcher:
                           IDS_IMAGE: texture(rec.ids, layout.items, 1, 0),
                           LINKS_IMAGE: texture(rec.links, layout.links, 4, -1),
                           POINTS_IMAGE: texture(self._points, layout.items, 1, 0.0)}
+        self._textures[NEIGHBORS_IMAGE] = texture(rec.boundary_neighbors, layout.items, 1, -1)
+        if distinct.copies is not None:
+            copies = np.zeros((mesh.n_tets, 4), dtype=np.int32)
+            copies[:, 0] = distinct.copies
+            self._textures[COPIES_IMAGE] = texture(copies, layout.items, 1, 0)
         pos = self.ctx.buffer(np.ascontiguousarray(rec.boundary_triangles, dtype=np.float32).tobytes())
         slots = self.ctx.buffer(np.repeat(rec.boundary_slots.astype(np.int32), 3).tobytes())
         self._faces = [pos, slots]
         self._shifts = layout.defines
-        self._mesh, self._records = mesh, rec
-        return rec
+        self._mesh, self._walked, self._records = given, mesh, rec
+        self._jumps = bool(np.any(rec.links[..., 3]))  # the field jumps at some faces (march.frag, JUMPS)
+        return mesh, rec
 
     def _write_points(self, mesh: TetMesh, rec: MarchRecords, inv_view: NDArray[np.float64]) -> None:
         """The points relative to the eye, for the walk (march.frag): in float64 first,
@@ -303,7 +234,7 @@ class Marcher:
                                                                   t[f"last_{side}"]], depth_attachment=t["depth"])
         for name, tex in t.items():
             if "fbo" not in name:
-                tex.filter = (_NEAREST, _NEAREST)
+                tex.filter = (NEAREST, NEAREST)
         return t
 
     # ---- the frame ----
@@ -329,7 +260,7 @@ class Marcher:
         import moderngl
 
         ctx = self.ctx
-        rec = self._use_mesh(mesh)
+        mesh, rec = self._use_mesh(mesh)
         clock.lap("upload")
         perspective = int(not camera.parallel_projection)
         view = np.asarray(uniforms["u_view"], dtype=np.float64)
@@ -347,6 +278,7 @@ class Marcher:
         clock.lap("entry")
 
         march_defines = dict(defines, **self._shifts, PERSPECTIVE=perspective, CELL_DATA=int(mesh.cell_data),
+                             MULTIPLICITY=int(COPIES_IMAGE in self._textures), JUMPS=int(self._jumps),
                              **(window.defines if window is not None else {}))
         samplers = dict(u_entry=4, u_color_in=5, u_state_in=6, u_last_in=7, u_state=5, u_last=7)
         steps = dict(u_max_steps=int(min(mesh.n_tets + 1, 1 << 30)), u_opaque=1.0 - OPAQUE_REMAINDER)
@@ -381,7 +313,7 @@ class Marcher:
 
     def _first_entries(self, t: dict[str, Any], mesh: TetMesh, rec: MarchRecords, camera: Camera,
                        size: tuple[int, int], common: dict[str, Any], perspective: int, extent: bool
-                       ) -> tuple[bool, _Rim | None, int]:
+                       ) -> tuple[bool, Rim | None, int]:
         """Layer 1's entry pass: boundary faces and the cells the near plane cuts. Returns
         whether the march passes read an entry list, this view's rim faces and the number
         of cells the near plane cut."""
@@ -404,7 +336,7 @@ class Marcher:
         if near_ids.size:
             near_prog = self._entry_program(perspective, near_cells=1)
             self._set(near_prog, common)
-            near_buffers = [ctx.buffer(_rect_triangles(rects).tobytes()),
+            near_buffers = [ctx.buffer(rect_triangles(rects).tobytes()),
                             ctx.buffer(np.repeat(near_ids.astype(np.int32), 6).tobytes())]
             vao = ctx.vertex_array(near_prog, [(near_buffers[0], "2f", "in_pos"), (near_buffers[1], "1i", "in_id")])
             vao.render(moderngl.TRIANGLES)
@@ -455,7 +387,7 @@ class Marcher:
             self.ctx.disable(moderngl.DEPTH_TEST)
             t[f"fbo_{dst}"].depth_mask = True
 
-    def _peel(self, t: dict[str, Any], src: str, rim: _Rim | None, perspective: int, common: dict[str, Any],
+    def _peel(self, t: dict[str, Any], src: str, rim: Rim | None, perspective: int, common: dict[str, Any],
               samplers: dict[str, Any]) -> None:
         """Peel: the next entry behind where each ray of set ``src`` left the mesh, if any
         ray did; the occlusion query counts the samples (none: no ray enters again)."""
@@ -479,7 +411,7 @@ class Marcher:
         ctx.disable(moderngl.DEPTH_TEST)
 
     def _rim_buffers(self, mesh: TetMesh, rec: MarchRecords, camera: Camera,
-                     size: tuple[int, int]) -> _Rim | None:
+                     size: tuple[int, int]) -> Rim | None:
         """This view's :func:`~tetvr.mesh.records.rim_faces` on the GL, or None without any."""
         idx, rects, exclusive = rim_faces(rec, camera, size)
         if idx.size == 0:
@@ -490,12 +422,12 @@ class Marcher:
         drawn = np.ones(rec.boundary_slots.shape[0], dtype=bool)
         drawn[idx[exclusive]] = False
         indices = (3 * np.flatnonzero(drawn)[:, None] + np.arange(3)).astype(np.uint32).reshape(-1)
-        return _Rim(rects=self.ctx.buffer(_rect_triangles(rects).tobytes()),
+        return Rim(rects=self.ctx.buffer(rect_triangles(rects).tobytes()),
                     corners=self.ctx.buffer(per_face.tobytes()),
                     slots=self.ctx.buffer(slots.tobytes()), drawn=self.ctx.buffer(indices.tobytes() or b"\0" * 4),
                     n_faces=int(idx.size), n_drawn=int(indices.size))
 
-    def _draw_rim(self, rim: _Rim | None, perspective: int, peel: int, common: dict[str, Any],
+    def _draw_rim(self, rim: Rim | None, perspective: int, peel: int, common: dict[str, Any],
                   samplers: dict[str, Any], listed: bool = False) -> None:
         import moderngl
 
@@ -562,7 +494,7 @@ class Marcher:
 
         set_uniforms(prog, **uniforms)
 
-    def _draw_faces(self, prog: Any, rim: _Rim | None) -> None:
+    def _draw_faces(self, prog: Any, rim: Rim | None) -> None:
         """The boundary faces that face the eye, but for this view's rim faces (``rim``,
         :meth:`_rim_buffers`): the GL culls the others before they are rasterised (they are
         wound counter-clockwise seen from outside), and the shader drops the few whose

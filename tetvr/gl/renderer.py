@@ -24,8 +24,7 @@ from tetvr.mesh.tetmesh import TetMesh
 from tetvr.optics.preintegrate import table_for
 from tetvr.optics.table import PreintegrationTable
 from tetvr.optics.tablesize import resolve as resolve_table_size, segment_sample
-from tetvr.order.precision import check_view_precision
-from tetvr.order.precision import check_float32_range
+from tetvr.order.precision import check_float32_range, check_view_precision, float32_clipping_range
 from tetvr.settings import RenderSettings
 from tetvr.order.cull import gpu_scalar_margin, visible_cells
 from tetvr.order.sort import sort_with_stats
@@ -519,6 +518,7 @@ class Renderer(GLOwner):
 
     def _march_frame(self, mesh: TetMesh, camera: Camera, size: tuple[int, int], table_uniforms: dict[str, Any],
                      defines: dict[str, int], window: RayWindow) -> NDArray[np.float32]:
+        camera = float32_clipping_range(mesh, camera)
         uniforms = self._march_uniforms(mesh, camera, size)
         image = self._march.render(mesh, camera, size, uniforms, table_uniforms, defines, self._clock, window)
         err = self.ctx.error
@@ -538,6 +538,7 @@ class Renderer(GLOwner):
         """
         if self._uses_raymarch(mesh):
             size = self._check(size)
+            camera = float32_clipping_range(mesh, camera)
             ext = self._march.extent(mesh, camera, size, self._march_uniforms(mesh, camera, size), self._clock)
             front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)
             back = np.where(ext[..., 1] <= -3e38, -np.inf, ext[..., 1]).astype(np.float32)
@@ -550,6 +551,7 @@ class Renderer(GLOwner):
         """Per pixel, how many ray--tet segments tet marching walks (no early termination):
         the measure of the ray caster's work (``bench/stages.py``)."""
         size = self._check(size)
+        camera = float32_clipping_range(mesh, camera)
         ext = self._march.extent(mesh, camera, size, self._march_uniforms(mesh, camera, size), self._clock)
         return ext[..., 2].astype(np.int64)
 

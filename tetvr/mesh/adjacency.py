@@ -13,6 +13,13 @@ so pairing is a comparison of neighbours in the sorted array: O(m log m) in nump
 no Python loop. A face held by more than two cells (a non-manifold mesh) is left
 unpaired, i.e. treated as boundary on every side, and counted.
 
+Faces are keyed by *welded* point ids: points at exactly the same coordinates count as one
+(:func:`coincident_points`). FEM tools write a mesh of several material regions with each
+region's own copy of the nodes on the interface; welded, the two copies of an interface face
+pair up like any interior face, so the regions join into one mesh (the walk of
+:mod:`tetvr.mesh.records` goes straight through, and MPVO orders across). The fields are
+not welded: each copy keeps its own value, so a field that jumps at the interface still does.
+
 Each face plane is stored as an outward unit normal ``n`` and an offset ``d`` with
 ``n . (x - origin) = d`` on the face, where ``origin`` is the centre of the mesh's
 bounding box: measuring from there keeps ``|d|`` below the mesh radius, so the rounding
@@ -59,11 +66,15 @@ class FaceAdjacency:
     n_nonmanifold_faces : distinct faces held by more than two tets (left unpaired).
     cell_size : median longest edge of the tets, a length scale for heuristics.
     boundary_slots : (F,) int64 flat slots ``4 * t + k`` of the boundary faces.
-    boundary_faces : (F, 3) vertex ids of those faces (``FACE_VERTICES`` of each slot).
+    boundary_faces : (F, 3) vertex ids of those faces (``FACE_VERTICES`` of each slot),
+        welded (see ``canonical``).
     convex : whether the mesh fills a convex region: its boundary is one closed,
         connected, manifold surface, convex at every edge (then it is convex
         everywhere, Tietze 1928), so MPVO's order is exact from every viewpoint and
         rays through the boundary (:mod:`tetvr.order.boundary`) add nothing.
+    canonical : (n_points,) int64, each point's welded id (the lowest id of the points at
+        exactly its coordinates), or None where no two points coincide.
+    n_welded_points : points that coincide with a lower-numbered one (duplicated nodes).
 
     Examples
     --------
@@ -88,6 +99,8 @@ class FaceAdjacency:
     boundary_slots: NDArray[np.int64]
     boundary_faces: NDArray[np.int64]
     convex: bool = False
+    canonical: NDArray[np.int64] | None = None
+    n_welded_points: int = 0
 
 
 # Keyed on the identity of the (points, tets) arrays rather than on the mesh, so that
@@ -133,7 +146,9 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
     if 4 * m > np.iinfo(np.int32).max:  # pragma: no cover - flat slot ids are int32
         raise ValueError(f"face adjacency supports up to {np.iinfo(np.int32).max // 4} tets, got {m}")
 
-    p, q, n_nonmanifold = _pair_faces(tets, n_pts)
+    canonical = coincident_points(pts)
+    welded = tets if canonical is None else canonical[tets]
+    p, q, n_nonmanifold = _pair_faces(welded, n_pts)
     mates = np.full(4 * m, -1, dtype=np.int32)
     mates[p] = q
     mates[q] = p
@@ -154,8 +169,8 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
         arr.setflags(write=False)
     n_interior = int(p.size)
     boundary_slots = np.flatnonzero(mates.reshape(-1) < 0)
-    boundary_faces = tets[boundary_slots[:, None] >> 2, FACE_VERTICES[boundary_slots & 3]]
-    for out in (boundary_slots, boundary_faces):
+    boundary_faces = welded[boundary_slots[:, None] >> 2, FACE_VERTICES[boundary_slots & 3]]
+    for out in (boundary_slots, boundary_faces) + (() if canonical is None else (canonical,)):
         out.setflags(write=False)
     convex = n_nonmanifold == 0 and _convex_boundary(boundary_slots, boundary_faces, rel, normals, offsets, cell_size)
     return FaceAdjacency(
@@ -172,7 +187,38 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
         boundary_slots=boundary_slots,
         boundary_faces=boundary_faces,
         convex=convex,
+        canonical=canonical,
+        n_welded_points=0 if canonical is None else int(n_pts - np.unique(canonical).size),
     )
+
+
+def coincident_points(points: NDArray[np.float64]) -> NDArray[np.int64] | None:
+    """Each point's welded id: the lowest id of the points at exactly its coordinates
+    (``-0.0`` and ``0.0`` are one coordinate); None when no two points coincide.
+
+    Examples
+    --------
+    >>> coincident_points(np.array([[0.0, 0, 0], [1, 0, 0], [0, 0, 0]])).tolist()
+    [0, 1, 0]
+    >>> coincident_points(np.eye(3)) is None
+    True
+    """
+    pts = np.asarray(points, dtype=np.float64) + 0.0  # -0.0 + 0.0 is 0.0
+    n = pts.shape[0]
+    if n < 2:
+        return None
+    order = np.lexsort((np.arange(n), pts[:, 2], pts[:, 1], pts[:, 0]))
+    s = pts[order]
+    same = np.all(s[1:] == s[:-1], axis=1)
+    if not same.any():
+        return None
+    # The first of each run of equal rows (its lowest id: ties are ordered by id).
+    run_start = np.maximum.accumulate(np.where(np.r_[True, ~same], np.arange(n), 0))
+    canonical = np.empty(n, dtype=np.int64)
+    canonical[order] = order[run_start]
+    return canonical
+
+
 
 
 def _pair_faces(tets: NDArray[np.int64], n_pts: int) -> tuple[NDArray[np.intp], NDArray[np.intp], int]:

@@ -77,12 +77,15 @@ class MarchRecords:
     planes : (m, 4, 4) float32, face ``k`` of tet ``t``: ``(n, w)`` with ``n . x + w``
         negative inside (``x`` relative to ``origin``).
     scalar : (m, 4) float32, ``(g, c)`` with ``s(x) = g . x + c``.
-    ids : (m, 4) int32, each tet's point ids in increasing order: slot ``k`` of every
+    ids : (m, 4) int32, each tet's point ids in increasing welded id: slot ``k`` of every
         record is this point (face ``k`` is opposite it), so the three points of a face are
-        in the same order in both its tets.
+        in the same order in both its tets, also where each holds its own copy of them.
     links : (m, 4, 4) int32, across face ``k``: (the mate, the neighbour's point opposite
-        that face, the neighbour's cell scalar as float32 bits (cell data; else 0), 0); the
-        walk reads one link a step (``march.frag``).
+        that face (on the boundary: the face's row of ``boundary_neighbors``), the neighbour's cell scalar as float32 bits (cell data; else 0), 1 where
+        the point field jumps at the face, else 0); the walk reads one link a step
+        (``march.frag``). A face jumps where its points are duplicated nodes (two regions
+        meeting there, :func:`tetvr.mesh.adjacency.coincident_points`) whose copies carry
+        different values: the walk then takes the scalars of the tet it enters.
     boundary_slots : (F,) int64, ``4 * t + k`` of each boundary face.
     boundary_triangles : (F, 3, 3) float32, the boundary faces' corners (relative to
         ``origin``), counter-clockwise seen from outside the mesh.
@@ -91,6 +94,10 @@ class MarchRecords:
     boundary_edges : (F, 3) int64, each boundary face's edges as ``i * n_points + j``
         (point indices ``i < j``): faces sharing a key share that edge.
     boundary_pairs : (P, 2) int64, the pairs of boundary faces that share an edge.
+    boundary_neighbors : (F, 4) int32, each boundary face's neighbours on the boundary (the
+        faces sharing an edge with it) as slots ``4 * t + k``, -1 after the last: where a ray
+        leaves the mesh beside a fold of its surface, it may enter again at once through
+        one of them (``march.frag`` tests them as it tests the face it left by).
     boundary_planes : (F, 4) float64, ``planes`` of the boundary faces.
     boundary_spheres : (F, 4) float64, a sphere round each boundary face (centre, radius).
     origin : (3,) float64, the mesh's bounding-box centre.
@@ -106,6 +113,7 @@ class MarchRecords:
     boundary_corners: NDArray[np.int64]
     boundary_edges: NDArray[np.int64]
     boundary_pairs: NDArray[np.int64]
+    boundary_neighbors: NDArray[np.int32]
     boundary_planes: NDArray[np.float64]
     boundary_spheres: NDArray[np.float64]
     origin: NDArray[np.float64]
@@ -155,9 +163,10 @@ def march_records(mesh: TetMesh) -> MarchRecords:
         scalar[:, 3] = mesh.cell_scalars
     slots = np.asarray(adj.boundary_slots, dtype=np.int64)
     corners = tets[slots // 4][np.arange(slots.shape[0])[:, None], FACE_VERTICES[slots % 4]]
-    # The records list each tet's points in increasing id (slot k still opposite face k),
-    # so the three points of a face come in the same order in both its tets.
-    order = np.argsort(tets, axis=1, kind="stable")
+    # The records list each tet's points in increasing welded id (slot k still opposite
+    # face k), so the three points of a face come in the same order in both its tets.
+    welded = tets if adj.canonical is None else adj.canonical[tets]
+    order = np.argsort(welded, axis=1, kind="stable")
     new_slot = np.argsort(order, axis=1).reshape(-1)  # the inverse permutation, by flat slot
     flat = (np.arange(mesh.n_tets)[:, None] * 4 + order).reshape(-1)  # new flat slot -> old
     ids = tets.reshape(-1)[flat].reshape(-1, 4)
@@ -173,6 +182,8 @@ def march_records(mesh: TetMesh) -> MarchRecords:
     if mesh.cell_scalars is not None:
         cell = np.asarray(mesh.cell_scalars, dtype=np.float32).view(np.int32)
         links[..., 2] = np.where(inner, cell[nbr], 0)
+    elif adj.canonical is not None:
+        links[..., 3] = _jumps(ids, mates, np.asarray(mesh.scalars, dtype=np.float32))
     # Wound counter-clockwise seen from outside (the GL's front face): entry passes cull the rest.
     tri = rel[corners]
     inward = np.einsum("ij,ij->i", np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
@@ -180,17 +191,47 @@ def march_records(mesh: TetMesh) -> MarchRecords:
     corners[inward] = corners[inward][:, [0, 2, 1]]
     tri[inward] = tri[inward][:, [0, 2, 1]]
     slots = 4 * (slots // 4) + new_slot[slots]
-    a, b = corners, np.roll(corners, -1, axis=1)
+    a = corners if adj.canonical is None else adj.canonical[corners]
+    b = np.roll(a, -1, axis=1)
     edge_keys = np.minimum(a, b).astype(np.int64) * mesh.n_points + np.maximum(a, b)
+    pairs = _edge_pairs(edge_keys)
+    # On the boundary the link's second column names the face's row of boundary_neighbors.
+    links.reshape(-1, 4)[slots, 1] = np.arange(slots.size, dtype=np.int32)
     centres = tri.astype(np.float64).mean(axis=1)
     radii = np.sqrt(((tri - centres[:, None]) ** 2).sum(axis=-1)).max(axis=1)
     spheres = np.concatenate([centres, radii[:, None] * (1 + 1e-6)], axis=1)
     return MarchRecords(planes=planes, scalar=scalar, ids=ids.astype(np.int32), links=links, boundary_slots=slots,
                         boundary_triangles=tri.astype(np.float32), boundary_corners=corners.astype(np.int64),
-                        boundary_edges=edge_keys, boundary_pairs=_edge_pairs(edge_keys),
+                        boundary_edges=edge_keys, boundary_pairs=pairs,
+                        boundary_neighbors=_neighbors(slots, pairs),
                         boundary_planes=planes[slots // 4, slots % 4].astype(np.float64), boundary_spheres=spheres,
                         origin=origin,
                         convex=bool(adj.convex))
+
+
+def _jumps(ids: NDArray[np.intp], mates: NDArray[np.int64], scalars: NDArray[np.float32]) -> NDArray[np.int32]:
+    """(m, 4) int32: 1 across the faces whose points carry other values in the tet beyond
+    (duplicated nodes of two regions), as the GPU reads them (float32)."""
+    faces = scalars[ids[:, FACE_VERTICES]].reshape(-1, 3)  # (4m, 3), in the records' slot order
+    inner = mates >= 0
+    other = faces[np.maximum(mates, 0)]
+    return (inner & np.any(faces != other, axis=1)).astype(np.int32).reshape(-1, 4)
+
+
+def _neighbors(slots: NDArray[np.int64], pairs: NDArray[np.int64]) -> NDArray[np.int32]:
+    """(F, 4) int32: the slots of up to four boundary faces sharing an edge with each, -1 after."""
+    out = np.full((slots.size, 4), -1, dtype=np.int32)
+    if pairs.size == 0:
+        return out
+    face = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    other = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    order = np.argsort(face, kind="stable")
+    face, other = face[order], other[order]
+    start = np.searchsorted(face, face, side="left")
+    rank = np.arange(face.size) - start
+    keep = rank < 4  # a non-manifold edge can give a face more: the first four
+    out[face[keep], rank[keep]] = slots[other[keep]].astype(np.int32)
+    return out
 
 
 def _edge_pairs(edge_keys: NDArray[np.int64]) -> NDArray[np.int64]:

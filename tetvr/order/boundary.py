@@ -95,7 +95,8 @@ def boundary_constraints(mesh: TetMesh, camera: Camera, *, grid: int | None = No
     --------
     Two separate tets, one behind the other along the view axis:
 
-    >>> from tetvr import TetMesh, synthetic
+    >>> from tetvr import TetMesh
+    >>> from tetvr.mesh import synthetic
     >>> a = synthetic.single_tet()
     >>> b = synthetic.merge(a, TetMesh.from_arrays(a.points - (0.0, 0.0, 2.0), a.tets, a.scalars))
     >>> cam = Camera(position=(0.3, 0.3, 5.0), focal_point=(0.3, 0.3, 0.0))

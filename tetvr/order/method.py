@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tetvr.core.checks import warn
+from tetvr.order.walkable import walk_check
 from tetvr.settings import RenderSettings
 
 if TYPE_CHECKING:
@@ -70,8 +72,10 @@ def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Cam
 
     * settings only projected tetrahedra implement (:data:`PROJECTED_ONLY`: VTK parity,
       8-bit compositing, screen-linear interpolation);
-    * tangled meshes (cells that overlap in space: :func:`tetvr.mesh.records.folded_faces`),
-      which a walk from cell to cell cannot follow;
+    * meshes a walk from cell to cell cannot follow (:func:`tetvr.order.walkable.walk_check`:
+      the same cell twice, faces held by more than two cells, folded faces, overlapping
+      parts), with one warning naming what was found; ``method="raymarch"`` refuses them
+      with the same words (ValueError);
     * meshes above :data:`AUTO_MAX_TETS` (memory: projected tetrahedra draw in chunks);
     * given the camera and size, views from outside the mesh whose tets are so large on
       screen (:func:`segments_per_tet` above :data:`CROSSOVER_SEGMENTS_PER_TET`) that
@@ -85,6 +89,11 @@ def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Cam
     >>> choose(RenderSettings(optics="vtk"))
     'projected'
     """
+    if settings.method == "raymarch" and mesh is not None:
+        reasons = walk_check(mesh).reasons
+        if reasons:
+            raise ValueError(f"tet marching cannot render this mesh exactly: {'; '.join(reasons)}. Use "
+                             "method=\"projected\" (or \"auto\", which does)")
     if settings.method != "auto":
         return settings.method
     if settings.integration == "exact":
@@ -92,11 +101,14 @@ def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Cam
     if settings.optics == "vtk" or settings.framebuffer != "float32" or not settings.perspective_correct:
         return "projected"
     if mesh is not None:
-        from tetvr.mesh.records import folded_faces
-
         if mesh.n_tets > AUTO_MAX_TETS:
             return "projected"
-        if folded_faces(mesh):
+        check = walk_check(mesh)
+        if check.reasons:
+            caveat = (" (where cells overlap, projected tetrahedra composite them in an approximate order: "
+                      "method=\"reference\" is exact)" if check.overlapping else "")
+            warn(f"tet marching cannot render this mesh exactly: {'; '.join(check.reasons)}. Rendering by "
+                 f"projected tetrahedra instead{caveat}")
             return "projected"
         # (The estimate costs a pass over a sample of cells on every view change: skipped
         # where no cell size can cross over.)
@@ -126,7 +138,8 @@ def segments_per_tet(mesh: "TetMesh", camera: "Camera", size: tuple[int, int]) -
 
     Examples
     --------
-    >>> from tetvr import Camera, synthetic
+    >>> from tetvr import Camera
+    >>> from tetvr.mesh import synthetic
     >>> mesh = synthetic.cube(4)
     >>> round(segments_per_tet(mesh, Camera.fit(mesh, parallel=True), (64, 64)), 1) > 0
     True

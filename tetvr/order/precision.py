@@ -13,13 +13,15 @@ reference), so :func:`check_view_precision` refuses it and says what to change.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from tetvr.core.camera import Camera
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.optics.transfer import TransferFunction
 
-__all__ = ["check_view_precision", "check_float32_range", "MIN_FOOTPRINT_ULPS", "GPU_EXTENT_RANGE",
+__all__ = ["check_view_precision", "check_float32_range", "float32_clipping_range", "FLOAT32_CLIP_LIMIT", "MIN_FOOTPRINT_ULPS", "GPU_EXTENT_RANGE",
            "GPU_SCALAR_LIMIT", "GPU_MIN_RELATIVE_RANGE", "GPU_MIN_SPAN"]
 
 #: The pixel footprint must span at least this many float32 steps of the coordinates:
@@ -34,7 +36,8 @@ def check_view_precision(mesh: TetMesh, camera: Camera, size: tuple[int, int]) -
 
     Examples
     --------
-    >>> from tetvr import Camera, synthetic
+    >>> from tetvr import Camera
+    >>> from tetvr.mesh import synthetic
     >>> mesh = synthetic.cube(2)
     >>> check_view_precision(mesh, Camera.fit(mesh), (256, 256))   # fine: returns None
     >>> import dataclasses
@@ -119,3 +122,37 @@ def check_float32_range(mesh: TetMesh, tf: TransferFunction) -> None:
             f"GPU's float32 (below {GPU_MIN_RELATIVE_RANGE:g} of it); subtract an offset from the field and "
             "the transfer function (mesh.with_scalars) or use method='reference'"
         )
+
+
+#: A clipping plane at a depth beyond this (either sign) is moved to the mesh before the GPU
+#: sees it: float32 holds up to 3.4e38, and the projection multiplies depths together.
+FLOAT32_CLIP_LIMIT = 1e30
+
+
+def float32_clipping_range(mesh: TetMesh, camera: Camera) -> Camera:
+    """``camera``, with its clipping range cut to the mesh's depth range (and a margin of a
+    thousandth of it) where an end of it is beyond :data:`FLOAT32_CLIP_LIMIT`; the cut keeps
+    every part of the mesh that was in the range, so no pixel changes. (A parallel camera
+    with a range of (-1e308, 1.7e308) otherwise reaches the GPU as infinities.)
+
+    Examples
+    --------
+    >>> import dataclasses
+    >>> from tetvr.mesh import synthetic
+    >>> cam = Camera(position=(0, 0, 5), focal_point=(0, 0, 0), parallel_projection=True,
+    ...              clipping_range=(-1e308, 1.7e308))
+    >>> [round(v, 3) for v in float32_clipping_range(synthetic.cube(2, rotate=False), cam).clipping_range]
+    [4.499, 5.501]
+    """
+    near, far = camera.clipping_range
+    if max(abs(near), abs(far)) <= FLOAT32_CLIP_LIMIT:
+        return camera
+    view = camera.view_matrix()
+    depth = -(mesh.points @ view[2, :3] + view[2, 3])
+    lo, hi = float(depth.min()), float(depth.max())
+    pad = 1e-3 * (hi - lo) + 1e-300
+    new_near = max(near, lo - pad)
+    new_far = min(far, hi + pad)
+    if not new_near < new_far:
+        return camera  # nothing of the mesh in the range: what the range says is drawn (nothing)
+    return dataclasses.replace(camera, clipping_range=(new_near, new_far))

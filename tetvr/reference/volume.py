@@ -30,7 +30,8 @@ the voxel's three planes there), ``xray`` the length-weighted mean (trapezoid ru
 the first sign change of ``s - iso``, refined by bisection on the trilinear field and
 shaded with Blinn–Phong from central-difference gradients, as the shader does.
 
-Early ray termination and jitter are GPU accelerations: the reference ignores them.
+Early ray termination (an error bound, ``termination_tolerance``; 0: the full integral)
+stops a ray here by the GPU's rule. Jitter, a GPU acceleration, is ignored.
 """
 
 from __future__ import annotations
@@ -53,6 +54,7 @@ from tetvr.volume.volume import Volume
 
 __all__ = [
     "RAYCAST_MODES",
+    "TERMINATION_TOLERANCE",
     "INTERPOLATIONS",
     "INTEGRATIONS",
     "RaycastSettings",
@@ -72,6 +74,9 @@ INTERPOLATIONS = ("linear", "cubic")
 #: piece at the transfer function's control points and integrates each cut in closed form
 #: (no table), ``"table"`` looks it up in a pre-integration table.
 INTEGRATIONS = ("auto", "exact", "table")
+
+#: Default ``termination_tolerance``: 1/8 of half an 8-bit step (docs/limits.md: measured).
+TERMINATION_TOLERANCE = 2.0**-12
 
 #: Bisection steps that refine an isosurface hit inside the step that brackets it.
 ISO_REFINE_STEPS = 8
@@ -106,9 +111,12 @@ class RaycastSettings:
         where it crosses a voxel-index plane), or ``"auto"`` (default; ``None`` means the
         same): sized from the smallest voxel spacing and, for emission-absorption, the
         transfer function's opacity (:func:`tetvr.optics.raycast_size.auto_step`).
-    termination : stop a ray once its alpha reaches this (early ray termination); 1.0
-        disables it. The error it allows is at most ``1 - termination`` per pixel: the
-        default 0.998 keeps it below half an 8-bit step (0.99 cost the CT head 20 dB).
+    termination_tolerance : early ray termination as an error bound: an emission-absorption
+        ray (GPU and reference alike) stops once ``1 - alpha`` is at most this. Colours are
+        at most 1, so the rest of the ray could add at most ``1 - alpha`` to any channel: the
+        stop darkens a pixel by at most this. Default 2**-12; 0: the full integral.
+    termination : compatibility alias (old saved settings): ``termination=a`` sets the
+        tolerance ``1 - a``; not stored, read back as ``1 - termination_tolerance``.
     jitter : offset every ray's first sample by a random fraction of a step (seeded by
         ``seed`` and the pixel, so images are reproducible); trades wood-grain artefacts
         for noise. The integrated interval is unchanged.
@@ -144,7 +152,8 @@ class RaycastSettings:
 
     mode: Literal["emission_absorption", "mip", "xray", "isosurface"] = "emission_absorption"
     step: float | Literal["auto"] | None = "auto"
-    termination: float = 0.998
+    termination_tolerance: float = TERMINATION_TOLERANCE
+    termination: dataclasses.InitVar[float | None] = None
     jitter: bool = False
     seed: int = 0
     iso_value: float | None = None
@@ -157,7 +166,7 @@ class RaycastSettings:
     table_thickness_slices: int = 8
     tf_samples: int = 1024
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, termination: float | None) -> None:
         if self.mode not in RAYCAST_MODES:
             raise ValueError(f"mode must be one of {RAYCAST_MODES}, got {self.mode!r}")
         if self.step is None or isinstance(self.step, str):
@@ -169,7 +178,13 @@ class RaycastSettings:
             if not (math.isfinite(step) and step > 0):
                 raise ValueError(f"step must be a positive number of world units, got {self.step!r}")
             object.__setattr__(self, "step", step)
-        object.__setattr__(self, "termination", _float(self.termination, "termination", 0.0, 1.0, lo_open=True))
+        tolerance = float(self.termination_tolerance)
+        if termination is not None:  # 15 digits: 0.998 is the tolerance 0.002 (one cache key), not 0.0020...018
+            tolerance = float(f"{1.0 - _float(termination, 'termination', 0.0, 1.0, lo_open=True):.15g}")
+        if not 0.0 <= tolerance < 1.0:  # also NaN; at 1 every ray would stop after its first piece
+            raise ValueError(f"termination_tolerance must be in [0, 1), got {self.termination_tolerance!r}")
+        object.__setattr__(self, "termination_tolerance", tolerance)
+        object.__setattr__(self, "termination", 1.0 - tolerance)  # the read-only alias, not a field
         object.__setattr__(self, "jitter", bool(self.jitter))
         if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool) or not 0 <= int(self.seed) < 2**32:
             raise ValueError(f"seed must be an integer in [0, 2**32), got {self.seed!r}")
@@ -235,7 +250,7 @@ class RaycastSettings:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "RaycastSettings":
-        names = {f.name for f in dataclasses.fields(cls)}
+        names = {f.name for f in dataclasses.fields(cls)} | {"termination"}  # the alias of old files
         unknown = set(data) - names
         if unknown:
             raise ValueError(f"unknown ray-cast settings keys {sorted(unknown)}; expected some of {sorted(names)}")
@@ -373,8 +388,8 @@ def render_volume_reference(
     ----------
     volume, camera, tf : the scene.
     size : ``(width, height)`` in pixels.
-    settings : the mode, iso value, shading and clip box (step, jitter, termination
-        and table sizes are GPU settings and are ignored).
+    settings : the mode, iso value, shading, clip box and termination tolerance (0: the
+        full integral); step, jitter and table sizes are GPU settings and are ignored.
     t_start, t_end : optional ``(H, W)`` eye-depth limits per pixel (NaN/inf: none).
     fine_step : length of the pieces in world units; default 1/8 of the smallest spacing.
     budget : samples processed at once (bounds memory).
@@ -490,7 +505,14 @@ def _march(volume: Volume, tf: TransferFunction, s: RaycastSettings, rays: RayIn
 def _emission_absorption(volume: Volume, tf: TransferFunction, s: RaycastSettings, rays: RayIntervals,
                          x: _Samples) -> Float:
     rgb, theta = integrate_segments(x.scalar[x.piece], x.scalar[x.piece + 1], x.length, tf)
-    return composite(x.piece_ray, x.t[x.piece], rgb, theta, x.rows.shape[0])
+    keep: slice | NDArray[np.bool_] = slice(None)
+    if s.termination_tolerance > 0:  # raycast.frag's stop: a piece counts while the transmittance before it > tol
+        stop = -math.log(s.termination_tolerance)
+        capped = np.minimum(theta, stop + 1.0)  # changes no answer; keeps the sums finite and small
+        before = np.cumsum(capped) - capped  # pieces are in ray order, front to back
+        first = np.diff(x.piece_ray, prepend=-1) != 0
+        keep = before - before[first][np.cumsum(first) - 1] < stop
+    return composite(x.piece_ray[keep], x.t[x.piece][keep], rgb[keep], theta[keep], x.rows.shape[0])
 
 
 def _classified(tf: TransferFunction, value: Float) -> Float:

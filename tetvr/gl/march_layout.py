@@ -1,0 +1,107 @@
+"""How the tet-marching ray caster's records sit on the GL: the image units the passes read
+them from, the textures' layout (items a row, powers of two), and the GL buffers of one
+view's rim faces (:func:`tetvr.mesh.records.rim_faces`). Used by :mod:`tetvr.gl.raymarch`."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tetvr.mesh.records import RECORD_TEXELS
+
+__all__ = ["PLANES_IMAGE", "IDS_IMAGE", "LINKS_IMAGE", "POINTS_IMAGE", "COUNT_IMAGE", "LIST_IMAGE", "COPIES_IMAGE", "NEIGHBORS_IMAGE",
+           "OVERFLOW_BUFFER", "MORE_BUFFER", "LIST_LENGTH", "LIST_MAX_BYTES", "NEAREST", "Layout", "Rim",
+           "raymarch_capacity", "rect_triangles"]
+
+#: GL_NEAREST: records and targets are read with texelFetch, never filtered (the value of
+#: moderngl.NEAREST, written here so that importing this module imports no moderngl).
+NEAREST = 0x2600
+
+
+#: Image units of the walk's records, read with imageLoad (march_common.glsl): on llvmpipe
+#: an imageLoad costs less than a texelFetch (no sampler state, no level), and the walk
+#: measured 11-12 % faster on bluntfin at 512x512, images bit-identical. Units 0-3: GL 4.3
+#: guarantees 8 image units to a fragment shader.
+PLANES_IMAGE, IDS_IMAGE, LINKS_IMAGE, POINTS_IMAGE = 0, 1, 2, 3
+#: Image units of the first layer's entry list (march_entry.frag, LIST): each pixel's count
+#: of faces, and the faces; storage-buffer bindings of the pixels that overflowed it and of
+#: those that go on to another layer (march.frag, LIST).
+COUNT_IMAGE, LIST_IMAGE, OVERFLOW_BUFFER, MORE_BUFFER = 4, 5, 0, 1
+#: Faces listed per pixel: a pixel whose ray meets more front faces than this (in its
+#: clipping range) overflows the list, and that frame peels instead. With the list, the
+#: march passes pick each further entry themselves: no peel pass rasterises the boundary
+#: again, and none runs to find that no ray enters again.
+LIST_LENGTH = 8
+#: Most bytes the list may hold (its count and LIST_LENGTH faces a pixel, 68 B): a larger
+#: frame (above about 1400x1400) peels instead.
+LIST_MAX_BYTES = 128 << 20
+#: Image unit of each tet's number of copies (march.frag, MULTIPLICITY: a mesh in which
+#: cells repeat, :mod:`tetvr.mesh.copies`).
+COPIES_IMAGE = 6
+#: Image unit of each boundary face's neighbours on the boundary (march.frag, LIST:
+#: :attr:`tetvr.mesh.records.MarchRecords.boundary_neighbors`).
+NEIGHBORS_IMAGE = 7
+
+
+@dataclasses.dataclass(frozen=True)
+class Layout:
+    """Items per row of each records texture: powers of two, so that the shaders find an
+    item's row and column by a shift and a mask (llvmpipe has no vector integer division:
+    ``i / n`` with n a uniform costs one scalar division per lane; at 512x512 the walk
+    measured 17 % faster on bluntfin, 41 % on combustor)."""
+
+    planes: int  # tets a row of the planes texture (RECORD_TEXELS texels a tet)
+    links: int   # tets a row of the links texture (four texels a tet)
+    items: int   # tets a row of the ids texture, points a row of the points texture
+
+    @classmethod
+    def of(cls, max_texture_size: int) -> "Layout":
+        def pow2(n: int) -> int:
+            return 1 << max(0, n.bit_length() - 1)
+
+        return cls(min(pow2(max_texture_size // RECORD_TEXELS), 4096), min(pow2(max_texture_size // 4), 4096),
+                   min(pow2(max_texture_size), 8192))
+
+    def capacity(self, max_texture_size: int) -> int:
+        """The most tets (and points) the textures hold."""
+        return min(self.planes, self.links, self.items) * max_texture_size
+
+    @property
+    def defines(self) -> dict[str, int]:
+        return dict(TETS_ROW_SHIFT=self.planes.bit_length() - 1, LINKS_ROW_SHIFT=self.links.bit_length() - 1,
+                    ITEMS_ROW_SHIFT=self.items.bit_length() - 1, PLANES_IMAGE=PLANES_IMAGE, IDS_IMAGE=IDS_IMAGE,
+                    LINKS_IMAGE=LINKS_IMAGE, POINTS_IMAGE=POINTS_IMAGE, COUNT_IMAGE=COUNT_IMAGE,
+                    LIST_IMAGE=LIST_IMAGE, OVERFLOW_BUFFER=OVERFLOW_BUFFER, MORE_BUFFER=MORE_BUFFER,
+                    COPIES_IMAGE=COPIES_IMAGE, NEIGHBORS_IMAGE=NEIGHBORS_IMAGE)
+
+
+def rect_triangles(rects: NDArray[np.float64]) -> NDArray[np.float32]:
+    """NDC rectangles (x_lo, y_lo, x_hi, y_hi) as two counter-clockwise triangles each:
+    (n, 6, 2) corners."""
+    return rects[:, [[0, 1], [2, 1], [2, 3], [0, 1], [2, 3], [0, 3]]].astype(np.float32)
+
+
+def raymarch_capacity(max_texture_size: int) -> int:
+    """The most tets whose records fit one texture of a GL with this GL_MAX_TEXTURE_SIZE."""
+    return Layout.of(max_texture_size).capacity(max_texture_size)
+
+
+@dataclasses.dataclass(frozen=True)
+class Rim:
+    """One view's :func:`~tetvr.mesh.records.rim_faces` on the GL: vertex buffers of the
+    rectangles (6 corners a face), of each face's corners in float64 and of its slot, and an
+    index buffer of the boundary faces the rasteriser draws (``n_drawn`` indices)."""
+
+    rects: Any
+    corners: Any
+    slots: Any
+    drawn: Any
+    n_faces: int
+    n_drawn: int
+
+    def release(self) -> None:
+        for b in (self.rects, self.corners, self.slots, self.drawn):
+            b.release()
