@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from tetvr import Camera, RenderSettings, TransferFunction
+from tetvr.core.clip import Clip
 from tetvr.mesh import synthetic
 
 NAN = float("nan")
@@ -198,3 +199,53 @@ def test_bad_settings(kwargs, match):
 def test_settings_from_dict_unknown_key():
     with pytest.raises(ValueError, match=r"unknown settings keys \['speed'\]"):
         RenderSettings.from_dict({"speed": 1})
+
+
+# ---- Clip -------------------------------------------------------------------------
+
+@pytest.mark.parametrize("normal,unit", [
+    ((1e300, 1e300, 1e300), (1 / math.sqrt(3),) * 3),  # its squared norm overflows
+    ((1.7e308, -1.7e308, 0), (1 / math.sqrt(2), -1 / math.sqrt(2), 0)),
+    ((1e-200, 0, 0), (1.0, 0.0, 0.0)),  # its squared norm underflows to 0
+    ((5e-324, 5e-324, 0), (1 / math.sqrt(2), 1 / math.sqrt(2), 0)),  # subnormal
+    ((0, 0, 2), (0.0, 0.0, 1.0)),
+], ids=["huge", "near-max", "tiny", "subnormal", "plain"])
+def test_clip_plane_normalises_any_finite_normal(normal, unit):
+    with np.errstate(all="raise"):
+        clip = Clip.plane((0.0, 0.0, 0.0), normal)
+    nx, ny, nz, w = clip.planes[0]
+    assert (nx, ny, nz) == pytest.approx(unit, rel=1e-15, abs=1e-300) and w == 0
+    # The plane still cuts: the side the normal points into is kept, the other is not.
+    assert clip.contains([unit, tuple(-v for v in unit)]).tolist() == [True, False]
+
+
+@pytest.mark.parametrize("origin,normal,match", [
+    ((0, 0, 0), (0, 0, 0), r"normal must not be the zero vector, got \(0\.0, 0\.0, 0\.0\); give the direction"),
+    ((0, 0, 0), (-0.0, 0, 0), "normal must not be the zero vector"),
+    ((0, 0, 0), (NAN, 0, 1), r"normal must be finite, got \(nan, 0\.0, 1\.0\)"),
+    ((0, 0, 0), (math.inf, 0, 0), "normal must be finite"),
+    ((1.5e308, 1.5e308, 1.5e308), (1, 1, 1), "beyond float64's range .* give an origin nearer the data"),
+], ids=["zero", "negative-zero", "nan", "inf", "distance-overflows"])
+def test_clip_plane_refuses_only_zero_or_non_finite(origin, normal, match):
+    with pytest.raises(ValueError, match=match):
+        Clip.plane(origin, normal)
+
+
+def test_clip_rows_are_normalised_safely():
+    assert Clip(((1e-200, 0, 0, 2e-200),)).planes == ((1.0, 0.0, 0.0, 2.0),)
+    assert Clip(((1e300, 0, 0, -3e300),)).planes == ((1.0, 0.0, 0.0, -3.0),)
+    with pytest.raises(ValueError, match="plane 0 has a zero normal.*give a normal that is not"):
+        Clip(((0, 0, 0, 1),))
+    with pytest.raises(ValueError, match=r"plane 0 .* lies beyond float64's range .* overflows"):
+        Clip(((1e-300, 0, 0, 1e300),))
+
+
+@pytest.mark.parametrize("up,want", [((0, 1e-200, 0), (0.0, 1.0, 0.0)), ((1e300, 1e300, 0), (2**-0.5, 2**-0.5, 0.0)),
+                                     ((0, 2, 0), (0.0, 2.0, 0.0))], ids=["tiny", "huge", "plain-kept-as-given"])
+def test_camera_view_up_of_any_finite_length_is_kept(up, want):
+    """As Clip.plane: a view up whose squared length leaves float64's range is not "the
+    zero vector" (tiny) nor lost to an overflow (huge); ordinary ones are kept as given."""
+    with np.errstate(all="raise"):
+        cam = Camera(position=(0, 0, 5), view_up=up)
+        assert cam.view_up == pytest.approx(want, rel=1e-15)
+        assert np.all(np.isfinite(cam.view_matrix()))

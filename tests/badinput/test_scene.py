@@ -66,7 +66,23 @@ SCENE_BAD = [
     ("camera-parallel-word", {**BASE, "camera": {"position": [0, 0, 1], "parallel_projection": "yes"}}, ValueError,
      "parallel_projection must be true or false, got 'yes'"),
     ("camera-clipping-three", {**BASE, "camera": {"position": [0, 0, 1], "clipping_range": [1, 2, 3]}}, ValueError,
-     "clipping_range must be two finite numbers"),
+     r"scene camera 'clipping_range' must be a list of 2 numbers .* got \[1, 2, 3\]"),
+    ("camera-position-strings", {**BASE, "camera": {"position": ["0", "0", "5"]}}, ValueError,
+     r"scene camera 'position' must be a list of 3 numbers such as \[0, 0, 0\], got \['0', '0', '5'\]"),
+    ("camera-position-string", {**BASE, "camera": {"position": "0 0 5"}}, ValueError,
+     r"scene camera 'position' must be a list of 3 numbers .* got '0 0 5'"),
+    ("camera-focal-point-bool", {**BASE, "camera": {"position": [0, 0, 5], "focal_point": [True, 0, 0]}}, ValueError,
+     r"scene camera 'focal_point' must be a list of 3 numbers .* got \[True, 0, 0\]"),
+    ("camera-view-angle-string", {**BASE, "camera": {"position": [0, 0, 5], "view_angle": "30"}}, ValueError,
+     "scene camera 'view_angle' must be a number, got '30'"),
+    ("camera-clipping-strings", {**BASE, "camera": {"position": [0, 0, 5], "clipping_range": ["1", "9"]}},
+     ValueError, r"scene camera 'clipping_range' must be a list of 2 numbers"),
+    ("camera-fit-direction-strings", {**BASE, "camera": {"fit": {"direction": ["1", "0", "0"]}}}, ValueError,
+     r"scene camera.fit 'direction' must be a list of 3 numbers .* got \['1', '0', '0'\]"),
+    ("camera-fit-zoom-string", {**BASE, "camera": {"fit": {"zoom": "2"}}}, ValueError,
+     "scene camera.fit 'zoom' must be a number, got '2'"),
+    ("clip-normal-strings", {**BASE, "clip": {"plane": {"origin": [0, 0, 0], "normal": ["1", 0, 0]}}}, ValueError,
+     r"clip 'plane' 'normal' must hold numbers, got \['1', 0, 0\]"),
     ("settings-string", {**BASE, "settings": "fast"}, ValueError, "'settings' must be an object of RenderSettings fields"),
     ("settings-unknown", {**BASE, "settings": {"speed": 1}}, ValueError, r"unknown settings keys \['speed'\]"),
     ("settings-bad-value", {**BASE, "settings": {"table_scalar_bins": "many"}}, ValueError, "table_scalar_bins must be"),
@@ -92,6 +108,13 @@ def test_good_scene_loads(scene_dir):
     path = scene_dir / "scene.json"
     path.write_text(json.dumps(BASE))
     assert load_scene(path).size == (8, 8)
+    cam = {"position": [0, 0, 5.5], "focal_point": [0, 0, 0], "view_up": [0, 1, 0], "view_angle": 30}
+    path.write_text(json.dumps({**BASE, "camera": cam}))
+    assert load_scene(path).camera.position == (0.0, 0.0, 5.5)
+    path.write_text(json.dumps({**BASE, "camera": {"fit": {"direction": [1, 0, 0], "view_up": None, "zoom": 2}}}))
+    assert load_scene(path).camera.view_angle == 30.0
+    path.write_text(json.dumps({**BASE, "clip": {"plane": {"origin": [0, 0, 0], "normal": [1e300, 0, 0]}}}))
+    assert load_scene(path).clip.planes == ((1.0, 0.0, 0.0, 0.0),)  # not a zero normal that keeps everything
 
 
 @pytest.mark.parametrize("text,match", [

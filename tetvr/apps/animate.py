@@ -24,8 +24,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tetvr.core.camera import Camera
-from tetvr.io.series import read_time_series
-from tetvr.io.video import VIDEO_SUFFIXES, write_frames
+from tetvr.io.series import read_time_series, series_input_paths
+from tetvr.io.video import VIDEO_SUFFIXES, check_frames_output, write_frames
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.settings import RenderSettings
 from tetvr.optics.transfer import TransferFunction
@@ -127,10 +127,14 @@ def animate(scene: Any, out: str | os.PathLike[str], *, orbit_frames: int | None
     from tetvr.scene.scene import Scene
     from tetvr.scene.load import load_scene
 
+    inputs = [] if isinstance(scene, Scene) else [("scene file", os.fspath(scene))]
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     if orbit_frames is None and time_series is None:
         raise ValueError("nothing to animate: give orbit_frames, time_series or both")
+    # Before a step is read or a frame rendered: no frame over an input, and a place to write.
+    inputs += [("mesh file", p) for p in scene.input_paths()] + series_input_paths(time_series)
+    check_frames_output(out, inputs, by="animate")
     if scheduler is not None:
         if time_series is None or orbit_frames is not None:
             raise ValueError("a scheduler renders a time series with the scene's camera: give time_series "
@@ -150,4 +154,4 @@ def animate(scene: Any, out: str | os.PathLike[str], *, orbit_frames: int | None
     cams = orbit(scene.camera, n, degrees=degrees) if orbit_frames is not None else [scene.camera] * n
     images = render_frames(zip(meshes, cams), scene.tf, size=size, settings=scene.settings,  # type: ignore[arg-type]
                            progress=progress, total=n, **scene.render_options)
-    return write_frames(images, out, background=scene.background, fps=fps)
+    return write_frames(images, out, background=scene.background, fps=fps, inputs=inputs)

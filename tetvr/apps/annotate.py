@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tetvr.core.camera import Camera
 from tetvr.core.image import DEFAULT_BACKGROUND, atomic_output, composite_over, to_rgba8
+from tetvr.core.outputs import check_outputs, check_writable
 from tetvr.optics.transfer import TransferFunction
 
 __all__ = ["Picture", "annotate", "panels", "plot", "show", "as_mesh"]
@@ -63,12 +64,16 @@ class Picture:
 
     image: NDArray[np.float32]
     png: bytes
+    #: The files the picture was made from (:func:`plot` of a path): never written over.
+    inputs: tuple[str, ...] = ()
 
     def _repr_png_(self) -> bytes:
         return self.png
 
     def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the annotated PNG (atomically)."""
+        """Write the annotated PNG (atomically; never over the file it was made from)."""
+        check_outputs([("picture", path)], [("mesh file", p) for p in self.inputs], by="this picture")
+        check_writable(path, "picture")
         with atomic_output(path) as f:
             f.write(self.png)
 
@@ -475,4 +480,4 @@ def plot(
                        background=background)
     else:
         png = png_bytes(image, background=background)
-    return Picture(image=image, png=png)
+    return Picture(image=image, png=png, inputs=(os.fspath(mesh),) if isinstance(mesh, (str, os.PathLike)) else ())

@@ -34,6 +34,7 @@ from tetvr.apps.animate import azimuth
 from tetvr.apps.vtkrender import MAPPERS, VTKProcess, VTKUnavailableError, vtk_status
 from tetvr.core.camera import Camera
 from tetvr.core.image import atomic_output, psnr, rmse, write_png
+from tetvr.core.outputs import check_outputs_in, check_writable_folder
 from tetvr.settings import PARITY_SETTINGS
 
 __all__ = [
@@ -113,7 +114,12 @@ def compare(
     >>> table = compare(load_scene("scene.json"), outdir="out")  # doctest: +SKIP
     >>> [(m["label"], m["psnr"]["exact"]) for m in table["methods"]]  # doctest: +SKIP
     """
+    scene_file = [("scene file", os.fspath(scene))] if isinstance(scene, (str, os.PathLike)) else []
     scene = _checked_scene(scene, mappers, references, views)
+    if outdir is not None:  # before anything is rendered: write_report's files over no input
+        check_outputs_in(outdir, lambda name: name.startswith("comparison.") or name.endswith(".png"),
+                         "the comparison", scene_file + [("mesh file", p) for p in scene.input_paths()], by="compare")
+        check_writable_folder(outdir, "the comparison")
     say = log or (lambda line: None)
     vtk_info: dict[str, Any] = {}
     if mappers:

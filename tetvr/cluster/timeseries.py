@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from tetvr.cluster.workers import _dask, cluster_client, worker_renderer
 from tetvr.core.camera import Camera
 from tetvr.core.image import image_size
+from tetvr.core.outputs import check_outputs, check_writable
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.optics.transfer import TransferFunction, default_unit_distance
 from tetvr.settings import RenderSettings
@@ -71,6 +72,28 @@ def series_sources(steps: Any) -> list[_Step]:
         out.append(_Step(s if isinstance(s, TetMesh) else os.path.abspath(os.fspath(s)), float(i)))
     if not out:
         raise ValueError("the series is empty: give at least one mesh or file")
+    return out
+
+
+def _step_inputs(items: list[_Step]) -> list[tuple[str, str]]:
+    """``(what, path)`` for every file the steps read: what no frame may be written over."""
+    from tetvr.io.collections import read_pvd
+    from tetvr.io.series import series_input_paths, xdmf_data_files
+
+    out: list[tuple[str, str]] = []
+    seen: set[str] = set()
+    for step in items:
+        src = step.source
+        if isinstance(src, TetMesh):
+            continue
+        if isinstance(src, tuple):  # a step of a .pvd or of an XDMF time series: its files, once
+            path = str(src[1] if len(src) == 3 else src[0])
+            if path not in seen:
+                seen.add(path)
+                out += ([("time-series file", path)] + [("time-series data file", p) for p in xdmf_data_files(path)]
+                        if len(src) == 3 else [("collection file", p) for p in read_pvd(path).input_paths()])
+            continue
+        out += series_input_paths(src)
     return out
 
 
@@ -137,6 +160,29 @@ def _render_step(source: Source, camera: Camera, tf: TransferFunction, size: tup
     return output
 
 
+def _frame_names(output: str | os.PathLike[str] | None, items: list[_Step]) -> list[str | None]:
+    """Each step's PNG from the ``output`` pattern (None: no files), checked before the
+    cluster starts: one name a step, no frame over a step's file, a folder to write in."""
+    if output is None:
+        return [None] * len(items)
+    pattern = os.fspath(output)
+    if len(items) > 1 and "{" not in pattern:
+        raise ValueError(f"output must be a pattern with {{index}} or {{time}} for {len(items)} steps, "
+                         f"got {pattern!r}")
+    try:
+        names = [pattern.format(index=i, time=s.time) for i, s in enumerate(items)]
+    except (KeyError, IndexError, ValueError) as exc:
+        raise ValueError(f"the output pattern {pattern!r} may use only {{index}} and {{time}} fields "
+                         f"(e.g. 'frames/f_{{index:04d}}.png'): {exc!r}") from None
+    if len(set(names)) != len(names):
+        raise ValueError(f"the output pattern {pattern!r} gives two steps the same file name")
+    outputs = [(f"frame of step {i}", name) for i, name in enumerate(names)]
+    check_outputs(outputs, _step_inputs(items), by="render_series")
+    for label, name in outputs:
+        check_writable(name, label)
+    return list(names)
+
+
 class _Bounds:
     """What :meth:`Camera.fit` reads of a mesh: the union of the steps' bounds."""
 
@@ -170,7 +216,9 @@ def render_series(
         in every frame.
     output : None to return the premultiplied float images; else a PNG name pattern with
         ``{index}`` and/or ``{time}`` (``"frames/f_{index:04d}.png"``), written on the
-        workers, atomically; the names are returned.
+        workers, atomically; the names are returned. Before the cluster starts, a
+        ``ValueError`` refuses a name that is one of the steps' files (or a link to one)
+        and a ``PermissionError`` a folder that cannot be written (:mod:`tetvr.core.outputs`).
     client : see :func:`cluster_client`.
     progress : a tqdm bar over the finished frames.
 
@@ -186,19 +234,11 @@ def render_series(
 
     from tetvr.render import _tf_range
 
-    distributed = _dask()
     items = series_sources(steps)
     settings = settings or RenderSettings()
     size = image_size(size)
-    names: list[str | None] = [None] * len(items)
-    if output is not None:
-        pattern = os.fspath(output)
-        if len(items) > 1 and "{" not in pattern:
-            raise ValueError(f"output must be a pattern with {{index}} or {{time}} for {len(items)} steps, "
-                             f"got {pattern!r}")
-        names = [pattern.format(index=i, time=s.time) for i, s in enumerate(items)]
-        if len(set(names)) != len(names):
-            raise ValueError(f"the output pattern {pattern!r} gives two steps the same file name")
+    names = _frame_names(output, items)
+    distributed = _dask()
     with cluster_client(client) as c:
         if camera is None or tf is None:
             got = c.gather([c.submit(_summary, s.source, scalars, component, pure=False) for s in items])
@@ -230,16 +270,14 @@ def animate_series(scene: Any, steps: Any, out: str | os.PathLike[str], *, clien
     video (the frames gathered here, in order). Returns the files written."""
     from pathlib import Path
 
-    from tetvr.io.video import VIDEO_SUFFIXES, write_frames
+    from tetvr.io.video import VIDEO_SUFFIXES, check_frames_output, write_frames
 
-    out = Path(out)
+    inputs = [("mesh file", p) for p in scene.input_paths()] + _step_inputs(series_sources(steps))
+    out = check_frames_output(out, inputs, by="animate_series")
     kw = dict(camera=scene.camera, tf=scene.tf, size=tuple(size or scene.size), settings=scene.settings,
               scalars=scene.scalars, component=scene.component, client=client, progress=progress)
     if out.suffix.lower() in VIDEO_SUFFIXES:
         return write_frames(render_series(steps, **kw), out, background=scene.background, fps=fps)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"{out} exists and is not a folder; give a folder for PNG frames or a video file "
-                         f"({', '.join(VIDEO_SUFFIXES)})")
     out.mkdir(parents=True, exist_ok=True)
     names = render_series(steps, output=str(out / "frame_{index:04d}.png"), background=scene.background, **kw)
     return [Path(n) for n in names]

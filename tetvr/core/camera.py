@@ -39,6 +39,20 @@ def _vec3(value: Any, name: str) -> Vec3:
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
+def _safe_length(v: Vec3) -> Vec3:
+    """``v`` itself, or, where its squared length leaves float64's range (components
+    beyond ~1e150 or below ~1e-150, which a norm overflows to inf or underflows to 0),
+    the same direction at unit length; the zero vector stays zero."""
+    with np.errstate(over="ignore", under="ignore"):
+        length = float(np.linalg.norm(v))
+    big = max(abs(c) for c in v)
+    if 1e-150 < length < 1e150 or big == 0.0:
+        return v
+    u = np.asarray(v) / big
+    u = u / np.linalg.norm(u)
+    return (float(u[0]), float(u[1]), float(u[2]))
+
+
 def _real(value: Any, name: str) -> float:
     """A finite float; booleans and strings are not numbers here."""
     if isinstance(value, (bool, np.bool_, str, bytes)):
@@ -92,7 +106,7 @@ class Camera:
     def __post_init__(self) -> None:
         pos = _vec3(self.position, "position")
         foc = _vec3(self.focal_point, "focal_point")
-        up = _vec3(self.view_up, "view_up")
+        up = _safe_length(_vec3(self.view_up, "view_up"))
         object.__setattr__(self, "position", pos)
         object.__setattr__(self, "focal_point", foc)
         object.__setattr__(self, "view_up", up)

@@ -46,6 +46,30 @@ def _vector(value: Any, name: str) -> NDArray[np.float64]:
     return v
 
 
+def _length(n: NDArray[np.float64]) -> float:
+    """The length of a finite 3-vector, without overflow or underflow: where its square
+    would leave float64's range (components beyond ~1e150 or below ~1e-150), it is scaled
+    by its largest component first."""
+    with np.errstate(over="ignore", under="ignore"):
+        length = float(np.linalg.norm(n))
+    if 1e-150 < length < 1e150:
+        return length  # as before: the plain norm, bit for bit
+    big = float(np.max(np.abs(n)))
+    return 0.0 if big == 0.0 else big * float(np.linalg.norm(n / big))
+
+
+def _unit(n: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """``n`` (finite) scaled to unit length, or None for the zero vector: neither 1e300
+    (whose square overflows) nor 1e-200 (whose square underflows to 0) loses the direction."""
+    length = _length(n)
+    if length == 0.0:
+        return None
+    if math.isinf(length):  # components near float64's largest: scale first
+        n = n / float(np.max(np.abs(n)))
+        length = float(np.linalg.norm(n))
+    return n / length  # type: ignore[no-any-return]
+
+
 @dataclasses.dataclass(frozen=True)
 class Clip:
     """Half-spaces of world space; the mesh is kept where all of them hold.
@@ -76,20 +100,39 @@ class Clip:
             raise ValueError(f"a clip holds at most {MAX_CLIP_PLANES} planes, got {arr.shape[0]}")
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"planes must be finite, got {arr.tolist()}")
-        norm = np.linalg.norm(arr[:, :3], axis=1)
-        if not np.all(norm > 0):
-            raise ValueError(f"plane {int(np.argmin(norm))} has a zero normal: {arr[int(np.argmin(norm))].tolist()}")
-        arr = arr / norm[:, None]  # unit normals: w is then a signed distance
-        object.__setattr__(self, "planes", tuple(tuple(float(v) for v in row) for row in arr))
+        rows = []
+        for i, row in enumerate(arr):
+            n = _unit(row[:3])
+            if n is None:
+                raise ValueError(f"plane {i} has a zero normal: {row.tolist()}; give a normal that is not (0, 0, 0)")
+            big = float(np.max(np.abs(row[:3])))
+            with np.errstate(over="ignore"):
+                length = _length(row[:3])
+                # w over the normal's length: a signed distance (scaled as the normal was)
+                w = row[3] / length if math.isfinite(length) else row[3] / float(np.linalg.norm(row[:3] / big)) / big
+            if not np.isfinite(w):
+                raise ValueError(f"plane {i} {row.tolist()} lies beyond float64's range from the origin "
+                                 "(w over the normal's length overflows); give a plane nearer the data")
+            rows.append((*(float(v) for v in n), float(w)))
+        object.__setattr__(self, "planes", tuple(rows))
 
     # ---- construction ----
     @classmethod
     def plane(cls, origin: ArrayLike, normal: ArrayLike) -> "Clip":
         """Keep the side of the plane through ``origin`` that ``normal`` points into."""
         o, n = _vector(origin, "origin"), _vector(normal, "normal")
-        if not np.linalg.norm(n) > 0:
-            raise ValueError("normal must not be the zero vector")
-        return cls(((*n.tolist(), -float(n @ o)),))
+        unit = _unit(n)
+        if unit is None:
+            raise ValueError(f"normal must not be the zero vector, got {tuple(n.tolist())}; give the direction "
+                             "the kept side lies in")
+        if 1e-150 < _length(n) < 1e150:
+            unit = n  # as before, bit for bit: the row is normalised in __post_init__
+        with np.errstate(over="ignore", invalid="ignore"):
+            w = 0.0 - float(unit @ o)  # +0.0, not -0.0, for a plane through the origin
+        if not math.isfinite(w):
+            raise ValueError(f"the plane through origin {tuple(o.tolist())} is beyond float64's range from (0, 0, 0) "
+                             "(its distance overflows); give an origin nearer the data")
+        return cls(((*unit.tolist(), w),))
 
     @classmethod
     def box(cls, lo: ArrayLike, hi: ArrayLike) -> "Clip":
@@ -125,6 +168,7 @@ class Clip:
         unknown = set(data) - {"planes", "plane", "box"}
         if unknown:
             raise ValueError(f"unknown clip keys {sorted(unknown)}; expected some of ['box', 'plane', 'planes']")
+        _refuse_non_numbers(data, "clip")
         rows: list[Any] = []
         if "planes" in data:
             rows += list(data["planes"])
@@ -154,6 +198,19 @@ class Clip:
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         p = np.asarray(self.planes)
         return np.all(pts @ p[:, :3].T + p[:, 3] >= 0, axis=1)  # type: ignore[no-any-return]
+
+
+def _refuse_non_numbers(value: Any, where: str) -> None:
+    """``ValueError`` naming the key for a string or boolean where a scene file's clip
+    holds numbers (numpy would read ``"5"`` as 5 and ``true`` as 1 without a word)."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _refuse_non_numbers(v, f"{where} {k!r}")
+    elif isinstance(value, (list, tuple)):
+        for v in value:
+            if isinstance(v, (str, bytes, bool)) or v is None:
+                raise ValueError(f"{where} must hold numbers, got {value!r}")
+            _refuse_non_numbers(v, where)
 
 
 def check_clip(clip: Any) -> "Clip | None":

@@ -4,8 +4,11 @@ written atomically; the memory an image of a given size may take."""
 from __future__ import annotations
 
 import contextlib
+import errno
+import io
 import os
 import secrets
+import stat
 import struct
 import zlib
 from typing import IO, Any, Iterator, Sequence
@@ -117,6 +120,15 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
     Readers never see a half-written file, and a file that is also an input of the
     command (a hard link, say) is replaced, not written through.
 
+    Two kinds of path are not renamed over:
+
+    * A **symbolic link** is followed: the file it points to is replaced (atomically, as
+      above), so the link survives and points at the new file.
+    * A path that is **not a regular file** -- a FIFO, a device, ``/dev/stdout`` (a link
+      to a pipe or a terminal) -- is written through: opened and written, all at once
+      when the block ends without an error (nothing is written after an error). Opening
+      a FIFO waits, as for any program, until a reader opens it.
+
     Examples
     --------
     >>> import tempfile, pathlib
@@ -129,10 +141,18 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
     target = os.fspath(path)
     if isinstance(target, bytes):
         target = os.fsdecode(target)
+    if not os.path.basename(target) or os.path.isdir(target):
+        raise IsADirectoryError(f"cannot write {target!r}: it is a directory, not a file name")
+    if _is_special(target):
+        buffer = io.BytesIO()
+        yield buffer
+        with open(target, "wb") as f:
+            f.write(buffer.getbuffer())
+        return
+    if os.path.islink(target):
+        target = os.path.realpath(target)
     folder, name = os.path.split(target)
     folder = folder or "."
-    if not name or os.path.isdir(target):
-        raise IsADirectoryError(f"cannot write {target!r}: it is a directory, not a file name")
     if not os.path.isdir(folder):
         raise FileNotFoundError(f"cannot write {target!r}: the folder {folder!r} does not exist")
     while True:
@@ -143,6 +163,12 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
             break
         except FileExistsError:  # pragma: no cover - 48 random bits
             continue
+        except OSError as exc:  # said of the output, not of the hidden temporary file
+            if exc.errno not in (errno.EACCES, errno.EPERM, errno.EROFS):
+                raise
+            why = "read-only file system" if exc.errno == errno.EROFS else "permission denied"
+            raise PermissionError(f"cannot write {target!r}: the folder {folder!r} is not writable ({why}); "
+                                  "choose another folder, or make it writable") from None
     try:
         with os.fdopen(fd, "wb") as f:
             yield f
@@ -151,6 +177,15 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+def _is_special(path: str) -> bool:
+    """Whether ``path`` (links followed) exists and is neither a regular file nor a folder."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
 
 
 def available_memory() -> int | None:

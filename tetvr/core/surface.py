@@ -164,7 +164,38 @@ class Surface:
         path = os.fspath(path)
         if not os.path.isfile(path):
             raise FileNotFoundError(f"no surface file {path!r}")
-        return cls.from_meshio(meshio.read(path), **kwargs)
+        if not path.lower().endswith(".stl"):
+            return cls.from_meshio(meshio.read(path), **kwargs)
+        _check_binary_stl(path)
+        with np.errstate(over="ignore"):  # meshio's size test, 84 + 50 n in uint32, wraps on ASCII files
+            return cls.from_meshio(meshio.read(path), **kwargs)
+
+
+def _check_binary_stl(path: str) -> None:
+    """``ValueError`` for a binary STL whose triangle count disagrees with its size.
+
+    A binary STL is an 80-byte header, a little-endian uint32 count ``n``, and ``n``
+    50-byte triangles. meshio takes a file whose size is not ``84 + 50 n`` for ASCII (and
+    computes ``50 n`` in uint32, which wraps for ``n`` >= 2^32 / 50), so a damaged
+    binary file came back as "no triangles". A file that starts with ``solid`` and is
+    text is ASCII STL and left to meshio.
+    """
+    size = os.path.getsize(path)
+    with open(path, "rb") as f:
+        head = f.read(84)
+        sample = head + f.read(512)
+    if size < 84 or (head.lstrip()[:5].lower() == b"solid" and _is_text(sample)):
+        return
+    n = int.from_bytes(head[80:84], "little")
+    if 84 + 50 * n != size:
+        have = max(size - 84, 0) // 50
+        raise ValueError(f"surface file {path!r} is a binary STL that declares {n} triangles ({84 + 50 * n} bytes) "
+                         f"but is {size} bytes long ({have} whole triangles): it is truncated or damaged; "
+                         "export it again")
+
+
+def _is_text(data: bytes) -> bool:
+    return not any(b < 9 or 13 < b < 32 or b > 126 for b in data)
 
 
 def check_surfaces(surfaces: Any) -> tuple[Surface, ...]:

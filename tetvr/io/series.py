@@ -14,7 +14,7 @@ from tetvr.io.collections import _STEP, Collection, read_pvd
 from tetvr.io.meshfile import read
 from tetvr.mesh.tetmesh import TetMesh, _cell_to_point, _field_to_scalar
 
-__all__ = ["read_step", "read_time_series"]
+__all__ = ["read_step", "read_time_series", "series_input_paths", "xdmf_data_files"]
 
 
 def read_time_series(source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], scalars: str | None = None,
@@ -94,3 +94,44 @@ def read_step(collection: Collection | str | os.PathLike[str], index: int, scala
         return read(coll.path, scalars, component=component)
     finally:
         _STEP.reset(token)
+
+
+def series_input_paths(source: Any) -> list[tuple[str, str]]:
+    """``(what, path)`` for every file a time series reads (as :func:`read_time_series`
+    takes it: mesh files, a ``.pvd`` and the files it names, an XDMF file and its HDF5
+    data): what no output of the same call may be written over. Names that are not files
+    are left out; the reader reports them."""
+    from tetvr.io.collections import is_collection, leaf_files
+
+    names = [source] if isinstance(source, (str, os.PathLike)) else list(source or ())
+    out: list[tuple[str, str]] = []
+    for item in names:
+        if not isinstance(item, (str, os.PathLike)):
+            continue  # a mesh in memory
+        name = os.fspath(item)
+        out.append(("time-series file", name))
+        suffix = Path(name).suffix.lower()
+        if suffix in (".xdmf", ".xmf"):
+            out += [("time-series data file", p) for p in xdmf_data_files(name)]
+        elif is_collection(name) and os.path.isfile(name):
+            out += [("collection file", p) for p in leaf_files(name)]
+    return out
+
+
+def xdmf_data_files(path: str | os.PathLike[str]) -> list[str]:
+    """The HDF5 files an XDMF file's data items name (``file.h5:/dataset``), best effort:
+    an unreadable XDMF file is the reader's to report."""
+    import xml.etree.ElementTree as ET
+
+    if not os.path.isfile(path):  # never open a FIFO: it would block
+        return []
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError, ValueError):
+        return []
+    folder = os.path.dirname(os.path.abspath(path))
+    files = set()
+    for item in root.iter():
+        if item.tag.rsplit("}", 1)[-1] == "DataItem" and item.get("Format", "").upper() == "HDF" and item.text:
+            files.add(os.path.join(folder, item.text.strip().split(":", 1)[0]))
+    return sorted(files)

@@ -169,9 +169,15 @@ def read_dicom(path: str | os.PathLike[str], *, space: str = "LPS") -> Volume:
     sitk = _sitk("DICOM series")
     where = str(p)
     if is_dir:
-        ids = sitk.ImageSeriesReader.GetGDCMSeriesIDs(where)
+        shown = sitk.ProcessObject.GetGlobalWarningDisplay()
+        sitk.ProcessObject.SetGlobalWarningDisplay(False)  # GDCM's "No Series were found": said below, once
+        try:
+            ids = sitk.ImageSeriesReader.GetGDCMSeriesIDs(where)
+        finally:
+            sitk.ProcessObject.SetGlobalWarningDisplay(shown)
         if not ids:
-            raise ValueError(f"no DICOM images found in {where!r}")
+            raise ValueError(f"{where!r} is a folder with no DICOM images in it (a folder is read as a DICOM "
+                             "series, one file a slice); name a folder of DICOM slices, or a volume or mesh file")
         series = {uid: list(sitk.ImageSeriesReader.GetGDCMSeriesFileNames(where, uid)) for uid in ids}
         uid = max(series, key=lambda k: len(series[k]))
         if len(series) > 1:

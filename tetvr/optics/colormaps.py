@@ -103,18 +103,22 @@ def from_paraview(
     samples_per_segment : linear pieces per node interval where ParaView's curve is not
         linear in RGB.
     """
+    source = f"{os.fspath(preset)}: " if isinstance(preset, (str, os.PathLike)) else ""
     preset = _pick_preset(preset, name)
     label = preset.get("Name", "<unnamed>")
     if "RGBPoints" not in preset:
         kind = "an indexed (categorical) preset" if "IndexedColors" in preset else "a preset without RGBPoints"
-        raise ValueError(f"ParaView preset {label!r} is {kind}; only continuous colour maps convert")
-    if not isinstance(samples_per_segment, int) or samples_per_segment < 1:
+        raise ValueError(f"{source}ParaView preset {label!r} is {kind}; only continuous colour maps convert")
+    if isinstance(samples_per_segment, bool) or not isinstance(samples_per_segment, int) or samples_per_segment < 1:
         raise ValueError(f"samples_per_segment must be a positive integer, got {samples_per_segment!r}")
-    rgb = _rows(preset["RGBPoints"], 4, f"{label!r} RGBPoints")
+    rgb = _rows(preset["RGBPoints"], _RGB_COLUMNS, f"{source}ParaView preset {label!r} RGBPoints")
     space = str(preset.get("ColorSpace", "RGB"))
     if space not in COLOR_SPACES:
-        raise ValueError(f"ParaView preset {label!r} has ColorSpace {space!r}; supported: {COLOR_SPACES}")
-    op_nodes = _rows(preset["Points"], 4, f"{label!r} Points") if preset.get("Points") else None
+        raise ValueError(f"{source}ParaView preset {label!r} has ColorSpace {space!r}; supported: {COLOR_SPACES}")
+    op_nodes = (_rows(preset["Points"], _OPACITY_COLUMNS, f"{source}ParaView preset {label!r} Points")
+                if preset.get("Points") else None)
+    _check_rows(len(rgb), 0 if op_nodes is None else len(op_nodes), space, samples_per_segment,
+                f"{source}ParaView preset {label!r}")
 
     # The preset's own span (colour and opacity nodes together) maps onto scalar_range.
     xs = rgb[:, 0] if op_nodes is None else np.concatenate([rgb[:, 0], op_nodes[:, 0]])
@@ -271,16 +275,52 @@ def colormap(
 
 
 # ---------------------------------------------------------------- internals
-def _rows(flat: Any, width: int, what: str) -> NDArray[np.float64]:
-    arr = np.asarray(flat, dtype=np.float64).reshape(-1)
+#: Largest magnitude of a node's position: beyond it a map's span overflows float64.
+_MAX_POSITION = 1e300
+#: The columns of colour nodes (RGBPoints) and opacity nodes (Points), with their ranges.
+_RGB_COLUMNS = (("position", -_MAX_POSITION, _MAX_POSITION), ("red", 0.0, 1.0), ("green", 0.0, 1.0),
+                ("blue", 0.0, 1.0))
+_OPACITY_COLUMNS = (("position", -_MAX_POSITION, _MAX_POSITION), ("opacity", 0.0, 1.0), ("midpoint", 0.0, 1.0),
+                    ("sharpness", 0.0, 1.0))
+#: Most rows a preset may become (colour and opacity together, after resampling).
+_MAX_ROWS = 1 << 20
+
+
+def _rows(flat: Any, columns: tuple[tuple[str, float, float], ...], what: str) -> NDArray[np.float64]:
+    """Nodes: a flat list of groups of ``len(columns)`` numbers (JSON numbers: no strings,
+    no booleans), each finite and in its column's range, positions ascending."""
+    width = len(columns)
+    if not isinstance(flat, (list, tuple, np.ndarray)):
+        raise ValueError(f"{what} must be a list of numbers, got {type(flat).__name__} {flat!r:.60}")
+    values = np.asarray(flat, dtype=object).reshape(-1) if len(flat) else np.zeros(0)
+    for k, v in enumerate(values):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+            raise ValueError(f"{what}: value {k} is {v!r}, not a number; fix that value")
+    arr = values.astype(np.float64) if values.size else np.zeros(0)
     if arr.size == 0 or arr.size % width:
-        raise ValueError(f"{what} must hold groups of {width} numbers, got {arr.size} numbers")
+        raise ValueError(f"{what} must hold groups of {width} numbers ({', '.join(c[0] for c in columns)}), "
+                         f"got {arr.size} numbers")
     rows = arr.reshape(-1, width)
-    if not np.all(np.isfinite(rows)):
-        raise ValueError(f"{what} contains NaN or Inf")
+    for j, (label, lo, hi) in enumerate(columns):
+        bad = ~((rows[:, j] >= lo) & (rows[:, j] <= hi))  # NaN is bad too
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise ValueError(f"{what}: node {k}'s {label} is {float(rows[k, j])!r}, "
+                             f"{'not finite' if not np.isfinite(rows[k, j]) else f'outside [{lo:g}, {hi:g}]'}; "
+                             "fix that value")
     if np.any(np.diff(rows[:, 0]) < 0):
         raise ValueError(f"{what}: positions must be ascending, got {rows[:, 0].tolist()}")
     return rows
+
+
+def _check_rows(n_colour: int, n_opacity: int, space: str, per: int, what: str) -> None:
+    """``ValueError`` if the nodes, resampled ``per`` pieces a segment, would make more
+    than :data:`_MAX_ROWS` rows (a state's 256 pieces of 1e5 Diverging nodes: 2.6e7)."""
+    rows = n_colour * (2 if space == "Step" else 1 if space == "RGB" else per) + n_opacity * per
+    if rows > _MAX_ROWS:
+        raise ValueError(f"{what} ({n_colour} colour and {n_opacity} opacity nodes, {per} samples a segment) would "
+                         f"make up to {rows} transfer-function rows, more than {_MAX_ROWS}; use fewer nodes or "
+                         "fewer samples_per_segment")
 
 
 def _dedupe(rows: NDArray[np.float64]) -> tuple[tuple[float, ...], ...]:
@@ -370,7 +410,8 @@ def _interp_space(c1: NDArray[np.float64], c2: NDArray[np.float64], t: NDArray[n
         hsv[:, 0] %= 1.0
         return _hsv_to_rgb(hsv)
     if space == "Diverging":
-        return np.array([_diverging(c1, c2, float(s)) for s in t[:, 0]])
+        ends = _lab_to_msh(_rgb_to_lab(c1)), _lab_to_msh(_rgb_to_lab(c2))  # once a segment, not once a sample
+        return np.array([_diverging(c1, c2, float(s), ends) for s in t[:, 0]])
     raise ValueError(f"colour space {space!r}")  # pragma: no cover - checked by the caller
 
 
@@ -431,9 +472,13 @@ def _adjust_hue(msh: NDArray[np.float64], unsat_m: float) -> float:
     return float(h + spin) if h > -math.pi / 3 else float(h - spin)
 
 
-def _diverging(c1: NDArray[np.float64], c2: NDArray[np.float64], s: float) -> NDArray[np.float64]:
-    """Moreland's diverging interpolation (2009), as vtkColorTransferFunction's Diverging."""
-    m1, m2 = _lab_to_msh(_rgb_to_lab(c1)), _lab_to_msh(_rgb_to_lab(c2))
+def _diverging(c1: NDArray[np.float64], c2: NDArray[np.float64], s: float,
+               ends: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> NDArray[np.float64]:
+    """Moreland's diverging interpolation (2009), as vtkColorTransferFunction's Diverging.
+    ``ends``: the two colours in Msh, if the caller has them."""
+    if ends is None:
+        ends = _lab_to_msh(_rgb_to_lab(c1)), _lab_to_msh(_rgb_to_lab(c2))
+    m1, m2 = ends[0].copy(), ends[1].copy()
     dh = abs(m1[2] - m2[2])
     dh = min(dh, 2 * math.pi - dh)
     if m1[1] > 0.05 and m2[1] > 0.05 and dh > math.pi / 3:

@@ -54,7 +54,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -62,11 +61,15 @@ import numpy as np
 
 from tetvr.core.checks import check_input_file, warn
 from tetvr.core.camera import Camera, reset_clipping_range
+from tetvr.optics.table import check_unit_distance
+from tetvr.optics.transfer import paraview_unit_distance
+from tetvr.scene.pvsm import (MAX_COMPONENT, MAX_TABLE_VALUES, MAX_VIEW_SIZE, OPACITY_COLUMNS, RGB_COLUMNS, StateProxy,
+                              node_rows, parse_state)
 
 if TYPE_CHECKING:
     from tetvr.mesh.tetmesh import TetMesh
     from tetvr.scene.scene import Scene
-    from tetvr.optics.transfer import TransferFunction, paraview_unit_distance
+    from tetvr.optics.transfer import TransferFunction
 
 __all__ = ["ParaViewState", "load_state", "read_state", "state_transfer_function"]
 
@@ -114,61 +117,6 @@ class ParaViewState:
     view_time: float | None = None
 
 
-# ---------------------------------------------------------------- reading the XML
-class _Proxy:
-    def __init__(self, elem: ET.Element) -> None:
-        self.group = elem.get("group", "")
-        self.type = elem.get("type", "")
-        self.id = elem.get("id", "")
-        self.props = {p.get("name", ""): p for p in elem.findall("Property")}
-
-    def values(self, name: str) -> list[str]:
-        prop = self.props.get(name)
-        if prop is None:
-            return []
-        items = sorted(prop.findall("Element"), key=lambda e: int(e.get("index", "0")))
-        return [e.get("value", "") for e in items]
-
-    def refs(self, name: str) -> list[str]:
-        prop = self.props.get(name)
-        return [] if prop is None else [p.get("value", "") for p in prop.findall("Proxy")]
-
-    def floats(self, name: str, n: int | None = None) -> list[float] | None:
-        vals = self.values(name)
-        if not vals:
-            return None
-        try:
-            out = [float(v) for v in vals]
-        except ValueError:
-            raise ValueError(f"{self.type} property {name} holds {vals!r}, not numbers") from None
-        if n is not None and len(out) != n:
-            raise ValueError(f"{self.type} property {name} holds {len(out)} numbers, expected {n}")
-        return out
-
-    def number(self, name: str, default: float | None = None) -> float | None:
-        vals = self.floats(name)
-        return default if not vals else vals[0]
-
-    def flag(self, name: str, default: bool = False) -> bool:
-        value = self.number(name)
-        return default if value is None else bool(value)
-
-    def text(self, name: str, default: str | None = None) -> str | None:
-        vals = self.values(name)
-        return vals[0] if vals else default
-
-    def enum_text(self, name: str, table: dict[int, str]) -> str | None:
-        """An enumeration's entry, by the names the state lists (else ``table``)."""
-        raw = self.number(name)
-        if raw is None:
-            return None
-        prop = self.props[name]
-        for entry in prop.iter("Entry"):
-            if entry.get("value") == str(int(raw)):
-                return entry.get("text")
-        return table.get(int(raw), str(int(raw)))
-
-
 def read_state(path: str | os.PathLike[str]) -> ParaViewState:
     """Parse a ParaView state file (``.pvsm``).
 
@@ -181,23 +129,24 @@ def read_state(path: str | os.PathLike[str]) -> ParaViewState:
         representation and its reader (tetvr reads the data file; it does not run filters).
     """
     path = check_input_file(path, "ParaView state file")
-    version, proxies = _parse_state(path)
+    version, proxies = parse_state(path)
     rep, src, files = _rendered(proxies, path)
     view = _render_view(proxies, rep, path)
     view_time = view.number("ViewTime")
-    times = src.floats("TimestepValues") or []
+    times = src.floats("TimestepValues") or []  # every number is checked as it is read (StateProxy)
     data_file = files[0]
     if len(files) > 1 and len(times) == len(files) and view_time is not None:
         data_file = files[int(np.argmin(np.abs(np.asarray(times) - view_time)))]
 
     camera = _camera(view, path)
-    size = view.floats("ViewSize", 2)
+    size = view.integers("ViewSize", 2, 0, MAX_VIEW_SIZE)
     background = _background(view, proxies)
 
     # The colour map, its opacity function, the array.
     name_vals = rep.values("ColorArrayName")
     array = name_vals[4] if len(name_vals) >= 5 and name_vals[4] else None
-    assoc = _ASSOCIATIONS.get(int(float(name_vals[3])), "POINTS") if len(name_vals) >= 5 and name_vals[3] else "POINTS"
+    assoc = (_ASSOCIATIONS.get(rep.whole("ColorArrayName", name_vals[3], 0, 8), "POINTS")
+             if len(name_vals) >= 5 and name_vals[3] else "POINTS")
     lut_ids = rep.refs("LookupTable")
     lut = proxies.get(lut_ids[0]) if lut_ids else None
     if lut is None or array is None:
@@ -205,53 +154,42 @@ def read_state(path: str | os.PathLike[str]) -> ParaViewState:
                          "needs an array and its colour map")
     pwf_ids = rep.refs("ScalarOpacityFunction") or lut.refs("ScalarOpacityFunction")
     pwf = proxies.get(pwf_ids[0]) if pwf_ids else None
-    rgb = _rows(lut.floats("RGBPoints"), 4, "RGBPoints", path)
-    if pwf is not None and pwf.floats("Points"):
-        op = _rows(pwf.floats("Points"), 4, "Points", path)
+    rgb = node_rows(lut, "RGBPoints", RGB_COLUMNS)
+    if pwf is not None and pwf.values("Points"):
+        op = node_rows(pwf, "Points", OPACITY_COLUMNS)
     else:  # ParaView's default opacity function: a ramp over the colour map's range
         op = ((rgb[0][0], 0.0, 0.5, 0.0), (rgb[-1][0], 1.0, 0.5, 0.0))
     component = None
     if lut.enum_text("VectorMode", {0: "Magnitude", 1: "Component"}) == "Component":
-        component = int(lut.number("VectorComponent", 0.0) or 0)
+        component = lut.integer("VectorComponent", 0, 0, MAX_COMPONENT)
 
     def colour(name: str, use: str) -> tuple[float, float, float] | None:
-        c = lut.floats(name, 3)
+        c = lut.floats(name, 3, lo=0.0, hi=1.0)
         return tuple(c) if c is not None and lut.flag(use) else None  # type: ignore[return-value]
 
     unit = rep.number("ScalarOpacityUnitDistance")
+    if unit is not None and unit > 0:
+        check_unit_distance(unit, rep.where("ScalarOpacityUnitDistance"))
     return ParaViewState(
         path=os.fspath(path), version=version, data_file=data_file, reader=src.type, array=array,
         association=assoc, component=component, representation=rep.text("Representation", "") or "",
         mapper=rep.text("SelectMapper"), camera=camera,
-        view_size=(int(size[0]), int(size[1])) if size and size[0] >= 1 and size[1] >= 1 else None,
+        view_size=(size[0], size[1]) if size and size[0] >= 1 and size[1] >= 1 else None,
         background=background, color_space=lut.enum_text("ColorSpace", _COLOR_SPACES) or "RGB",
         rgb_points=rgb, opacity_points=op,  # type: ignore[arg-type]
         unit_distance=unit if unit is not None and unit > 0 else None,
         discretize=lut.flag("Discretize") and not lut.flag("IndexedLookup"),
-        n_table_values=int(lut.number("NumberOfTableValues", 256) or 256),
+        n_table_values=lut.integer("NumberOfTableValues", 256, 1, MAX_TABLE_VALUES),
         log_scale=lut.flag("UseLogScale"),
         opacity_log_scale=pwf.flag("UseLogScale") if pwf is not None else False,
-        nan_color=tuple(lut.floats("NanColor", 3) or (1.0, 1.0, 0.0)),  # type: ignore[arg-type]
+        nan_color=tuple(lut.floats("NanColor", 3, lo=0.0, hi=1.0) or (1.0, 1.0, 0.0)),  # type: ignore[arg-type]
         above_range_color=colour("AboveRangeColor", "UseAboveRangeColor"),
         below_range_color=colour("BelowRangeColor", "UseBelowRangeColor"),
         view_time=view_time,
     )
 
 
-def _parse_state(path: str) -> tuple[str, dict[str, _Proxy]]:
-    """The state's version and its proxies by id."""
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise ValueError(f"{path}: not a ParaView state file (not valid XML: {exc})") from None
-    sms = root if root.tag == "ServerManagerState" else root.find("ServerManagerState")
-    if sms is None:
-        raise ValueError(f"{path}: not a ParaView state file (no <ServerManagerState>, root is <{root.tag}>)")
-    version = sms.get("version", "")
-    return version, {p.id: p for p in (_Proxy(e) for e in sms.findall("Proxy"))}
-
-
-def _rendered(proxies: dict[str, _Proxy], path: str) -> tuple[_Proxy, _Proxy, list[str]]:
+def _rendered(proxies: dict[str, StateProxy], path: str) -> tuple[StateProxy, StateProxy, list[str]]:
     """The representation rendered (the visible volume, else the first visible one coloured by
     an array), the reader it shows directly (a filter between them is an error) and its files."""
     reps = [p for p in proxies.values() if p.group == "representations" and p.refs("Input")
@@ -281,7 +219,7 @@ def _rendered(proxies: dict[str, _Proxy], path: str) -> tuple[_Proxy, _Proxy, li
     return rep, src, files
 
 
-def _render_view(proxies: dict[str, _Proxy], rep: _Proxy, path: str) -> _Proxy:
+def _render_view(proxies: dict[str, StateProxy], rep: StateProxy, path: str) -> StateProxy:
     """The render view that shows ``rep`` (else the first render view)."""
     views = [p for p in proxies.values() if p.group == "views" and rep.id in p.refs("Representations")]
     if not views:
@@ -291,28 +229,22 @@ def _render_view(proxies: dict[str, _Proxy], rep: _Proxy, path: str) -> _Proxy:
     return views[0]
 
 
-def _rows(values: list[float] | None, width: int, name: str, path: str) -> tuple[tuple[float, ...], ...]:
-    if not values or len(values) % width:
-        raise ValueError(f"{path}: {name} must hold groups of {width} numbers, got {0 if not values else len(values)}")
-    return tuple(tuple(values[i:i + width]) for i in range(0, len(values), width))
-
-
-def _camera(view: _Proxy, path: str) -> Camera:
+def _camera(view: StateProxy, path: str) -> Camera:
     pos = view.floats("CameraPosition", 3)
     foc = view.floats("CameraFocalPoint", 3)
     if pos is None or foc is None:
         raise ValueError(f"{path}: the render view stores no camera (CameraPosition, CameraFocalPoint)")
+    fields = dict(view_up=tuple(view.floats("CameraViewUp", 3) or (0.0, 1.0, 0.0)),
+                  view_angle=view.number("CameraViewAngle", 30.0),
+                  parallel_projection=view.flag("CameraParallelProjection"),
+                  parallel_scale=view.number("CameraParallelScale", 1.0))
     try:
-        return Camera(position=tuple(pos), focal_point=tuple(foc),  # type: ignore[arg-type]
-                      view_up=tuple(view.floats("CameraViewUp", 3) or (0.0, 1.0, 0.0)),  # type: ignore[arg-type]
-                      view_angle=view.number("CameraViewAngle", 30.0),  # type: ignore[arg-type]
-                      parallel_projection=view.flag("CameraParallelProjection"),
-                      parallel_scale=view.number("CameraParallelScale", 1.0))  # type: ignore[arg-type]
+        return Camera(position=tuple(pos), focal_point=tuple(foc), **fields)  # type: ignore[arg-type]
     except ValueError as exc:
         raise ValueError(f"{path}: the render view's camera is not usable: {exc}") from None
 
 
-def _background(view: _Proxy, proxies: dict[str, _Proxy]) -> tuple[float, float, float]:
+def _background(view: StateProxy, proxies: dict[str, StateProxy]) -> tuple[float, float, float]:
     colour = view.floats("Background", 3)
     if view.flag("UseColorPaletteForBackground"):
         palette = [p for p in proxies.values() if p.type == "ColorPalette"]
@@ -328,8 +260,18 @@ def state_transfer_function(state: ParaViewState, *, unit_distance: float | None
     """The state's colour and opacity maps as a :class:`~tetvr.TransferFunction`.
 
     ``unit_distance`` defaults to the state's ``ScalarOpacityUnitDistance`` (then 1.0).
-    See the module notes for what each ParaView option becomes.
+    See the module notes for what each ParaView option becomes. A map tetvr cannot use
+    is a ``ValueError`` that names the state file.
     """
+    try:
+        return _transfer_function(state, unit_distance)
+    except ValueError as exc:
+        if Path(state.path).name in str(exc):
+            raise
+        raise ValueError(f"{state.path}: its colour and opacity maps make no usable transfer function: {exc}") from None
+
+
+def _transfer_function(state: ParaViewState, unit_distance: float | None) -> "TransferFunction":
     from tetvr.optics.colormaps import from_paraview
     from tetvr.optics.transfer import TransferFunction
 
@@ -386,8 +328,9 @@ def _discretized(state: ParaViewState, lo: float, hi: float) -> list[tuple[float
     ``vtkDiscretizableColorTransferFunction`` samples into its 8-bit lookup table, which
     then maps ``v`` to band ``floor((v - lo) n / (hi - lo))`` (the top value to the last)."""
     n, log = state.n_table_values, state.log_scale
-    if n < 1:
-        raise ValueError(f"{state.path}: NumberOfTableValues must be at least 1, got {n}")
+    if not 1 <= n <= MAX_TABLE_VALUES:  # read_state checks it; a state made by hand is checked here
+        raise ValueError(f"{state.path}: NumberOfTableValues must be a whole number from 1 to {MAX_TABLE_VALUES}, "
+                         f"got {n!r}")
     a, b = (math.log10(lo), math.log10(hi)) if log else (lo, hi)
     samples = a + (b - a) * (np.arange(n) / (n - 1) if n > 1 else np.array([0.5]))
     edges = a + (b - a) * np.arange(n + 1) / n

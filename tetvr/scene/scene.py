@@ -46,6 +46,7 @@ import numpy as np
 
 from tetvr.core.camera import Camera, reset_clipping_range
 from tetvr.core.image import DEFAULT_BACKGROUND, atomic_output, image_size
+from tetvr.core.outputs import check_outputs, check_writable
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.io.meshfile import read
 from tetvr.optics.table import check_unit_distance
@@ -156,9 +157,10 @@ class Scene:
         return (self.mesh_path, *(sp["path"] for sp in self.surface_specs))
 
     def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the scene as JSON (atomically; never over its own mesh file)."""
-        if os.path.exists(path) and any(os.path.exists(p) and os.path.samefile(path, p) for p in self.input_paths()):
-            raise ValueError(f"refusing to write the scene over its own mesh file {os.fspath(path)!r}")
+        """Write the scene as JSON (atomically; never over its own mesh or surface files)."""
+        check_outputs([("scene", path)], [("mesh file", self.mesh_path)]
+                      + [("surface file", sp["path"]) for sp in self.surface_specs], by="the scene")
+        check_writable(path, "scene")
         text = json.dumps(self.to_dict(relative_to=Path(path).resolve().parent), indent=2)
         with atomic_output(path) as f:
             f.write(text.encode("utf-8"))
@@ -237,15 +239,39 @@ def _tf_from_spec(spec: dict[str, Any], mesh: TetMesh) -> TransferFunction:
     return tf
 
 
+#: The camera's fields (explicit or "fit") that are lists of numbers, and how many.
+_CAMERA_VECTORS = {"position": 3, "focal_point": 3, "view_up": 3, "direction": 3, "clipping_range": 2}
+_CAMERA_NUMBERS = {"view_angle", "parallel_scale", "zoom"}
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _camera_values(spec: dict[str, Any], where: str) -> None:
+    """``ValueError`` naming the key for a camera field that is not a number, or not a
+    list of them, as JSON writes them: ``"0"`` and ``true`` are not numbers here."""
+    for key, value in spec.items():
+        n = _CAMERA_VECTORS.get(key)
+        if n is not None and not (where == "camera.fit" and key == "view_up" and value is None):
+            if not (isinstance(value, (list, tuple)) and len(value) == n and all(_is_number(v) for v in value)):
+                raise ValueError(f"scene {where} {key!r} must be a list of {n} numbers such as "
+                                 f"{[0] * n}, got {value!r}")
+        elif key in _CAMERA_NUMBERS and not _is_number(value):
+            raise ValueError(f"scene {where} {key!r} must be a number, got {value!r}")
+
+
 def _camera(spec: dict[str, Any], mesh: TetMesh) -> Camera:
     if not isinstance(spec, dict):
         raise ValueError(f"camera must be an object, got {spec!r}")
+    _camera_values(spec, "camera")
     if "fit" in spec:
         if set(spec) != {"fit"}:
             raise ValueError(f"a fitted camera takes only 'fit', got keys {sorted(spec)}")
         if not isinstance(spec["fit"], dict):
             raise ValueError(f"camera 'fit' must be an object of Camera.fit options, got {spec['fit']!r}")
         fit = dict(spec["fit"])
+        _camera_values(fit, "camera.fit")
         allowed = {"direction", "view_up", "view_angle", "parallel", "zoom"}
         unknown = set(fit) - allowed
         if unknown:

@@ -18,8 +18,12 @@ argparse's usage line before it) and one of these exit statuses:
 ====  =====================================================================================
 
 Outputs are never written over an input of the same command (the scene, the mesh it
-names, time-series files; compared as files, so links and other spellings count), and
-every file is written atomically: a failed command leaves an earlier file as it was.
+names, time-series files; compared as files, so links and other spellings count), an
+output's folder must be writable (both checked before the work, :mod:`tetvr.core.outputs`),
+and every file is written atomically: a failed command leaves an earlier file as it was.
+An output that is a symbolic link keeps it: the file it points to is replaced. An output
+that is not a regular file -- a FIFO, ``-o /dev/stdout`` -- is written through (the report
+line then goes to stderr, so the pipe carries the picture alone).
 
 This module parses the arguments and runs :func:`main`; the commands are in
 :mod:`tetvr.apps.cli.commands`, the checks that keep outputs off inputs in

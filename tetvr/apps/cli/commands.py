@@ -16,8 +16,8 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from tetvr.apps.cli.errors import EXIT_OK
-from tetvr.apps.cli.outputs import (_check_writable, _npy_path, _refuse_overwrite, _refuse_overwrite_in, _scene_inputs,
-                                    _series_inputs, _step_name)
+from tetvr.apps.cli.outputs import _npy_path, _report_stream, _scene_inputs, _series_inputs, _step_name
+from tetvr.core.outputs import check_outputs, check_outputs_in, check_writable, check_writable_folder
 
 #: Nothing public: :func:`tetvr.apps.cli.main` runs these.
 __all__: list[str] = []
@@ -82,7 +82,7 @@ def _render(args: argparse.Namespace) -> int:
                     raise ValueError(f"{flag} is for a mesh file; a scene sets it in its JSON ({args.scene!r})")
             for path, label in [(args.output, "PNG")] + ([(args.npy, "--npy array")] if args.npy else []):
                 if "{" not in path:
-                    _check_writable(path, label)
+                    check_writable(path, label)
             scene = load_scene(args.scene)
             inputs = _scene_inputs(args.scene, scene)
         else:
@@ -90,8 +90,8 @@ def _render(args: argparse.Namespace) -> int:
 
             inputs = [("mesh file", args.scene)]
             if "{" not in args.output and not is_collection(args.scene):
-                _check_writable(args.output, "PNG")
-                _refuse_overwrite([("PNG", args.output)], inputs)
+                check_writable(args.output, "PNG")
+                check_outputs([("PNG", args.output)], inputs)
             mesh = read(args.scene, args.scalars, component=args.component)
             size = args.size or (800, 600)
             scene = Scene(mesh_path=args.scene, mesh=mesh, tf=default_transfer_function(mesh, preset=args.cmap or "viridis"),
@@ -116,8 +116,8 @@ def _render(args: argparse.Namespace) -> int:
         jobs.append((i, t, png, npy))
     outputs = [("PNG", png) for _, _, png, _ in jobs] + [("--npy array", npy) for _, _, _, npy in jobs if npy]
     for label, path in outputs:
-        _check_writable(path, label)
-    _refuse_overwrite(outputs, inputs)
+        check_writable(path, label)
+    check_outputs(outputs, inputs)
     t1 = time.perf_counter()
     for i, t, png, npy in jobs:
         ts = time.perf_counter()
@@ -134,7 +134,7 @@ def _render(args: argparse.Namespace) -> int:
         step = f"step {i} (t = {t:g}): " if t is not None else ""
         print(f"{step}{mesh.n_tets} tets, field {mesh.scalar_name!r}, {size[0]}x{size[1]} px, {method}: "
               f"read {(t1 - t0) if i == 0 else (ts - t1):.2f} s, render {t2 - ts:.2f} s -> {what} {png}"
-              + (f" and {npy}" if npy else ""))
+              + (f" and {npy}" if npy else ""), file=_report_stream(png, npy))
         t1 = time.perf_counter()
     return EXIT_OK
 
@@ -188,7 +188,8 @@ def _fusion_demo(out: Path, size: tuple[int, int]) -> int:
     size = image_size(size)
     names = {f"fusion_{mode}.png" for mode in FUSION_MODES} | {"mesh_only.png", "volume_only.png", "fusion_modes.png"}
     if out.is_dir():
-        _refuse_overwrite_in(out, names.__contains__, "the fusion pictures", [("volume file", bundled("carotid.vtk"))])
+        check_outputs_in(out, names.__contains__, "the fusion pictures", [("volume file", bundled("carotid.vtk"))])
+    check_writable_folder(out, "the fusion pictures")
     out.mkdir(parents=True, exist_ok=True)
     scene = carotid_fusion()
     w, h = size
@@ -225,8 +226,9 @@ def _compare(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     if os.path.isdir(args.output):
         # write_report's files: comparison.json / .md and a PNG per picture.
-        _refuse_overwrite_in(args.output, lambda name: name.startswith("comparison.") or name.endswith(".png"),
-                             "the comparison", _scene_inputs(args.scene, scene))
+        check_outputs_in(args.output, lambda name: name.startswith("comparison.") or name.endswith(".png"),
+                         "the comparison", _scene_inputs(args.scene, scene))
+    check_writable_folder(args.output, "the comparison")
     mappers = [m for m in args.mappers.split(",") if m]
     compare(scene, mappers=mappers, views=args.views, size=tuple(args.size) if args.size else None,
             outdir=args.output, log=print)
@@ -236,19 +238,13 @@ def _compare(args: argparse.Namespace) -> int:
 
 def _animate(args: argparse.Namespace) -> int:
     from tetvr.apps.animate import animate
-    from tetvr.io.video import VIDEO_SUFFIXES
+    from tetvr.io.video import check_frames_output
     from tetvr.scene.load import load_scene
 
     scene = load_scene(args.scene)
-    inputs = _scene_inputs(args.scene, scene) + _series_inputs(args.time_series)
-    if Path(args.output).suffix.lower() in VIDEO_SUFFIXES:  # its folder is made if missing
-        if os.path.isdir(args.output):
-            raise IsADirectoryError(f"the video {args.output!r} is a directory; give a file name")
-        _refuse_overwrite([("video", args.output)], inputs)
-    elif os.path.isdir(args.output):
-        _refuse_overwrite_in(args.output, re.compile(r"frame_\d{4,}\.png").fullmatch, "frames",  # type: ignore[arg-type]
-                             inputs)
     series = _expand_series(args.time_series)
+    inputs = _scene_inputs(args.scene, scene) + _series_inputs(series)
+    check_frames_output(args.output, inputs)
     scheduler = args.scheduler or os.environ.get("TETVR_SCHEDULER") or None
     files = animate(scene, args.output, orbit_frames=args.orbit, degrees=args.degrees,
                     time_series=series, fps=args.fps, progress=not args.no_progress, scheduler=scheduler)
@@ -314,7 +310,13 @@ def _info(args: argparse.Namespace) -> int:
     if _is_volume(args.mesh):
         from tetvr.io.volume_file import read_volume
 
-        vol = read_volume(args.mesh)
+        try:
+            vol = read_volume(args.mesh)
+        except ValueError as exc:
+            if not os.path.isdir(args.mesh):
+                raise
+            raise ValueError(f"{exc}. tetvr info describes a mesh file (VTU, VTK, Gmsh, Exodus, ...), a volume file "
+                             "(NRRD, MetaImage, VTI, NIfTI, DICOM) or a folder of DICOM slices") from None
         lo, hi = vol.bounds
         print(f"{args.mesh}: a volume of {vol.dims[0]} x {vol.dims[1]} x {vol.dims[2]} voxels ({vol.dtype}), "
               f"spacing {' x '.join(f'{v:.4g}' for v in vol.spacing)}"
