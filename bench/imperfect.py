@@ -71,7 +71,7 @@ def cases(data: Path) -> list[Case]:
          lambda: imperfect.copies(synthetic.cube(3, imperfect.field, rotate=False), 2), _views((0.3, -0.5, -1.0))),
         ("repeated cells", "cube(1), every cell 200 times",
          lambda: imperfect.copies(synthetic.cube(1, imperfect.field, rotate=False), 200), _views((0.3, -0.5, -1.0))),
-        ("copies with other values", "cube(2), twice", lambda: imperfect.conflicting_copies(cube()),
+        ("copies with other values", "cube(4), twice", lambda: imperfect.conflicting_copies(cube()),
          _views((0.3, -0.5, -1.0))),
         ("overlapping parts", "refined block in a coarse cube", imperfect.embedded_block, _views((0.3, -0.5, -1.0))),
         ("overlapping parts", "one cell laid over a cube", imperfect.cell_laid_over, _views((0.3, -0.5, -1.0))),
