@@ -33,7 +33,8 @@ layer and neither.
 from __future__ import annotations
 
 import dataclasses
-from concurrent.futures import Future, ThreadPoolExecutor
+import threading
+from concurrent.futures import Future
 from typing import Any
 
 import numpy as np
@@ -64,7 +65,26 @@ OPAQUE_REMAINDER = 2.0**-20
 #: One background thread builds a new mesh's face adjacency and records while the
 #: renderer builds the frame's table (both numpy, which lets go of the GIL in its loops):
 #: the first frame overlaps the two instead of adding them.
-_PREFETCH = ThreadPoolExecutor(max_workers=1, thread_name_prefix="tetvr-records")
+#: The thread is a daemon, so that an interpreter leaving (Ctrl-C in a script) does not wait
+#: for a build it no longer needs; one build runs at a time.
+_BUILD_LOCK = threading.Lock()
+
+
+def _prefetch(mesh: TetMesh) -> Future[tuple[DistinctCells, MarchRecords]]:
+    """:func:`_records` of ``mesh``, built in a daemon thread."""
+    future: Future[tuple[DistinctCells, MarchRecords]] = Future()
+
+    def build() -> None:
+        if not future.set_running_or_notify_cancel():
+            return
+        try:
+            with _BUILD_LOCK:
+                future.set_result(_records(mesh))
+        except BaseException as exc:  # handed to whoever takes the records
+            future.set_exception(exc)
+
+    threading.Thread(target=build, name="tetvr-records", daemon=True).start()
+    return future
 
 
 def _records(mesh: TetMesh) -> tuple[DistinctCells, MarchRecords]:
@@ -144,7 +164,7 @@ class Marcher:
         """Start building ``mesh``'s records in the background (unless held or under way)."""
         if (mesh is self._mesh and self._records is not None) or (self._prefetch and self._prefetch[0] is mesh):
             return
-        self._prefetch = (mesh, _PREFETCH.submit(_records, mesh))
+        self._prefetch = (mesh, _prefetch(mesh))
 
     def settle(self, mesh: TetMesh, keep: bool) -> None:
         """Wait for a prefetch of ``mesh`` (its face adjacency is then cached), and drop it

@@ -31,7 +31,7 @@ from tetvr.order.sort import sort_with_stats
 from tetvr.optics.transfer import TransferFunction
 from tetvr.gl.context import create_context, describe
 from tetvr.gl.shaders import ShaderCompileError, assemble, explain
-from tetvr.order.method import choose
+from tetvr.order.method import AUTO_MAX_TETS, choose
 from tetvr.gl.projected import ProjectedCells
 from tetvr.gl.raymarch import Marcher, raymarch_capacity
 from tetvr.gl.vtkpt import VTKParity, vtk_depth_order
@@ -367,8 +367,11 @@ class Renderer(GLOwner):
             return self._render_vtk(mesh, camera, tf, size, order)
         if shader == "tet" and self.settings.integration == "exact":
             return self._raymarch_exact(mesh, camera, tf, size, order, window)
-        if shader == "tet" and order is None and self.settings.method != "projected":
-            self._march.prefetch(mesh)  # a new mesh's records, while the table is built
+        if (shader == "tet" and order is None and self.settings.method != "projected"
+                and not (self.settings.method == "auto" and mesh.n_tets > AUTO_MAX_TETS)):
+            # A new mesh's records, while the table is built (not for a mesh "auto" sends to
+            # projected tetrahedra by its size alone: 10M tets' records would pass 4.5 GB).
+            self._march.prefetch(mesh)
         table = self.table(mesh, tf)
         self._use_table(table)
         self._clock.lap("table")

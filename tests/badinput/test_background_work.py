@@ -1,0 +1,47 @@
+"""Background work that nobody will use is not started, and never holds the process.
+
+The records of tet marching are built in a background thread while the frame's table is
+built. A mesh that ``method="auto"`` sends to projected tetrahedra by its size alone starts
+no such build (10M tets' records passed 4.5 GB before being thrown away), and the thread is a
+daemon: an interrupted script exits at once instead of waiting for a build it will not use.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+import tetvr
+import tetvr.gl.renderer as renderer_module
+from tetvr import Camera, RenderSettings
+from tetvr.gl import raymarch
+from tetvr.mesh import synthetic
+from tetvr.render import default_transfer_function
+
+pytestmark = pytest.mark.gl
+
+
+def test_no_records_are_built_for_a_mesh_auto_sends_to_projected_tetrahedra(monkeypatch):
+    mesh = synthetic.cube(3)
+    monkeypatch.setattr(renderer_module, "AUTO_MAX_TETS", mesh.n_tets - 1)
+    started = []
+    monkeypatch.setattr(raymarch, "_prefetch", lambda m: started.append(m))
+    with tetvr.Renderer(RenderSettings()) as r:
+        r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(16, 16))
+    assert started == []
+
+
+def test_the_records_are_built_in_a_daemon_thread(monkeypatch):
+    seen = []
+    build = raymarch._records
+
+    def records(mesh):
+        seen.append(threading.current_thread())
+        return build(mesh)
+
+    monkeypatch.setattr(raymarch, "_records", records)
+    mesh = synthetic.cube(3)
+    with tetvr.Renderer(RenderSettings()) as r:
+        r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(16, 16))
+    assert seen and all(t.daemon and t is not threading.main_thread() for t in seen)
