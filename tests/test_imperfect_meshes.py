@@ -12,6 +12,7 @@ cannot walk, and clipping ranges beyond float32.
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import warnings
 
 import numpy as np
@@ -192,6 +193,22 @@ def test_a_clipping_range_beyond_float32_is_cut_to_the_mesh(parallel):
 def test_clean_meshes_have_nothing_to_route(make):
     check = walk_check(make())
     assert check.reasons == () and check.welded_points == 0
+
+
+def test_a_mesh_tetwild_makes_from_a_curved_surface_is_walked_right():
+    # An unstructured mesh as fTetWild fills a torus: graded cells, a curved boundary that
+    # rays graze and leave and enter again; nothing to route, and right from every side.
+    trimesh = pytest.importorskip("trimesh", reason="trimesh is not installed (pip install tetvr[mesh])")
+    if importlib.util.find_spec("pytetwild") is None:
+        pytest.skip("pytetwild is not installed (pip install tetvr[mesh])")
+    from tetvr.mesh.meshing import tetrahedralize
+
+    surface = trimesh.creation.torus(major_radius=1.0, minor_radius=0.35, major_sections=32, minor_sections=16)
+    mesh = tetrahedralize(surface, edge_length=0.2,
+                          field=lambda p: 0.5 + 0.5 * np.sin(2.0 * p[:, 0]) * p[:, 2] + 0.3 * p[:, 1]).mesh
+    assert walk_check(mesh).reasons == ()
+    for direction in [(0.0, -1.0, -0.35), (0.05, -1.0, -0.02), (-1.0, -0.6, -1.2)]:
+        _assert_right(mesh, Camera.fit(mesh, direction=direction), walked=True)
 
 
 @pytest.mark.data
