@@ -483,6 +483,12 @@ class Renderer(GLOwner):
                               f"this GL; use method=\"projected\" (or \"auto\") or split it into bricks")
         return fits
 
+    def _march_view(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> tuple[Camera, dict[str, Any]]:
+        """The camera the ray caster draws with (its clipping range cut to float32,
+        :func:`~tetvr.order.precision.float32_clipping_range`) and its view uniforms."""
+        camera = float32_clipping_range(mesh, camera)
+        return camera, self._march_uniforms(mesh, camera, size)
+
     def _march_uniforms(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> dict[str, Any]:
         view = camera.view_matrix()
         view[:3, 3] += view[:3, :3] @ mesh.float32_origin  # the records are relative to it
@@ -521,8 +527,7 @@ class Renderer(GLOwner):
 
     def _march_frame(self, mesh: TetMesh, camera: Camera, size: tuple[int, int], table_uniforms: dict[str, Any],
                      defines: dict[str, int], window: RayWindow) -> NDArray[np.float32]:
-        camera = float32_clipping_range(mesh, camera)
-        uniforms = self._march_uniforms(mesh, camera, size)
+        camera, uniforms = self._march_view(mesh, camera, size)
         image = self._march.render(mesh, camera, size, uniforms, table_uniforms, defines, self._clock, window)
         err = self.ctx.error
         if err != "GL_NO_ERROR":
@@ -541,8 +546,8 @@ class Renderer(GLOwner):
         """
         if self._uses_raymarch(mesh):
             size = self._check(size)
-            camera = float32_clipping_range(mesh, camera)
-            ext = self._march.extent(mesh, camera, size, self._march_uniforms(mesh, camera, size), self._clock)
+            camera, uniforms = self._march_view(mesh, camera, size)
+            ext = self._march.extent(mesh, camera, size, uniforms, self._clock)
             front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)
             back = np.where(ext[..., 1] <= -3e38, -np.inf, ext[..., 1]).astype(np.float32)
             return front, back
@@ -554,8 +559,8 @@ class Renderer(GLOwner):
         """Per pixel, how many ray--tet segments tet marching walks (no early termination):
         the measure of the ray caster's work (``bench/stages.py``)."""
         size = self._check(size)
-        camera = float32_clipping_range(mesh, camera)
-        ext = self._march.extent(mesh, camera, size, self._march_uniforms(mesh, camera, size), self._clock)
+        camera, uniforms = self._march_view(mesh, camera, size)
+        ext = self._march.extent(mesh, camera, size, uniforms, self._clock)
         return ext[..., 2].astype(np.int64)
 
     def _depth_extent(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]

@@ -188,7 +188,7 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
         boundary_faces=boundary_faces,
         convex=convex,
         canonical=canonical,
-        n_welded_points=0 if canonical is None else int(n_pts - np.unique(canonical).size),
+        n_welded_points=0 if canonical is None else int(np.count_nonzero(canonical != np.arange(n_pts))),
     )
 
 

@@ -102,27 +102,10 @@ def _find(mesh: TetMesh) -> DistinctCells:
     n_conflicting = int(np.count_nonzero(same & ~agree))
     if keep.size == tets.shape[0]:
         return DistinctCells(mesh, None, 0, n_conflicting)
-    # Cells keep their input order (the mesh is canonical: rows sorted), copies their first's place.
+    # The kept cells in their input order: the mesh's rows are canonical and sorted, so a
+    # subset of them in order is too, and from_arrays keeps it row for row.
     by_cell = np.argsort(keep, kind="stable")
     kept = keep[by_cell]
     cell = None if mesh.cell_scalars is None else np.asarray(mesh.cell_scalars)[kept]
     unique = TetMesh.from_arrays(mesh.points, tets[kept], mesh.scalars, scalar_name=mesh.scalar_name, cell_scalars=cell)
-    copies = counts[by_cell]
-    if unique.n_tets != kept.size:  # pragma: no cover - from_arrays drops nothing that was kept before
-        raise AssertionError("distinct cells lost a cell")
-    # from_arrays sorts rows: bring the copy counts into its order.
-    copies = _reordered(unique, mesh, kept, copies)
-    return DistinctCells(unique, copies, int(tets.shape[0] - kept.size), n_conflicting)
-
-
-def _reordered(unique: TetMesh, mesh: TetMesh, kept: NDArray[np.int64], copies: NDArray[np.int32]) -> NDArray[np.int32]:
-    """``copies`` (one per kept cell of ``mesh``) in the row order of ``unique``."""
-    def keys(t: NDArray[np.int64]) -> NDArray[np.int64]:
-        t = np.sort(np.asarray(t, dtype=np.int64), axis=1)
-        return np.lexsort(t.T[::-1])
-
-    src = np.sort(np.asarray(mesh.tets, dtype=np.int64)[kept], axis=1)
-    dst = np.sort(np.asarray(unique.tets, dtype=np.int64), axis=1)
-    out = np.empty_like(copies)
-    out[keys(dst)] = copies[keys(src)]
-    return out
+    return DistinctCells(unique, counts[by_cell], int(tets.shape[0] - kept.size), n_conflicting)
