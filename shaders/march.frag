@@ -170,6 +170,20 @@ float cross2(vec2 p, vec2 q) {
     return p.x * q.y - p.y * q.x;
 }
 
+// The eye's x and y axes seen across the ray (set in main).
+vec2 g_eye_x, g_eye_y;
+
+// The side of the ray that the edge from p to q passes, where e(p, q) = f is 0 (the ray
+// in the plane of the edge): the side it passes the ray moved by (e, e^2) along the eye's
+// x and y for an infinitesimal e, the reference's rule (tetvr.reference.segments), so that
+// a ray in a face's plane is in the tet the reference gives it to, and a ray in a boundary
+// face's plane is in the mesh exactly where the reference has it.
+float side(float f, vec2 p, vec2 q) {
+    if (f != 0.0) return f;
+    f = -cross2(g_eye_x, q - p);
+    return f != 0.0 ? f : -cross2(g_eye_y, q - p);
+}
+
 // Whether the ray enters the mesh through boundary face s (slot 4 * tet + k), and where: its
 // plane faces the ray and the ray, seen across it, passes inside its triangle -- decided with
 // the points as the walk sees them (across), so that for an edge the face shares with the
@@ -288,6 +302,8 @@ void main() {
     vec3 e2 = cross(dn, e1);
     float inv_dd = 1.0 / dot(d, d);
     vec3 ow = ray_from_eye(gl_FragCoord.xy);
+    g_eye_x = vec2(dot(u_inv_view[0].xyz, e1), dot(u_inv_view[0].xyz, e2));
+    g_eye_y = vec2(dot(u_inv_view[1].xyz, e1), dot(u_inv_view[1].xyz, e2));
     int sa, sb, sc;
     vec2 pa, pb, pc;
     vec3 ts, ss, E;
@@ -398,11 +414,27 @@ void main() {
             vec2 pn = n.xy;
             float tn = n.z;
             float fa = cross2(pa, pn), fb = cross2(pb, pn), fc = cross2(pc, pn);
+            float sa_ = side(fa, pa, pn), sb_ = side(fb, pb, pn), sc_ = side(fc, pc, pn);
             // Out by (b, c, n) if e(b, n) <= 0 < e(c, n); by (c, a, n) if e(c, n) <= 0 < e(a, n);
-            // else by (a, b, n). The next triangle keeps the counter-clockwise turn.
-            bool drop_a = fb <= 0.0 && fc > 0.0;
-            bool drop_b = !drop_a && fc <= 0.0 && fa > 0.0;
-            k = drop_a ? sa : (drop_b ? sb : sc);  // the exit face: opposite the point left behind
+            // else by (a, b, n): the point left behind, 0, 1 or 2 for a, b, c. The next
+            // triangle keeps the counter-clockwise turn.
+            int drop = sb_ <= 0.0 && sc_ > 0.0 ? 0 : (sc_ <= 0.0 && sa_ > 0.0 ? 1 : 2);
+            ivec3 slots = ivec3(sa, sb, sc);
+            k = slots[drop];  // the exit face: opposite the point left behind
+            link = tet_link(tet, k);
+            if (link.x < 0 && abs(dot(face_plane(tet, k).xyz, d)) <= GRAZING * per_t) {
+                // A boundary face the ray runs along (the eye in its plane): the ray lies on
+                // the mesh's closure there and goes on, as the reference has it. Seen across
+                // the ray the face is a segment through the origin, (x, y) the points it
+                // shares with the triangle, (y, x, n) on one line: the ray leaves it by the
+                // edge (x, n) or (n, y) about the origin, so by the face with that edge.
+                int x = (drop + 1) % 3, y = (drop + 2) % 3;
+                vec2 px_ = x == 0 ? pa : (x == 1 ? pb : pc), py_ = y == 0 ? pa : (y == 1 ? pb : pc);
+                drop = dot(pn, py_ - px_) > 0.0 ? y : x;
+                k = slots[drop];
+                link = tet_link(tet, k);
+            }
+            bool drop_a = drop == 0, drop_b = drop == 1;
             E = drop_a ? vec3(fc, -fb, E.x) : (drop_b ? vec3(fa, -fc, E.y) : vec3(fb, -fa, E.z));
             int s0 = drop_a ? sb : (drop_b ? sc : sa);
             int s1 = drop_a ? sc : (drop_b ? sa : sb);
@@ -421,7 +453,6 @@ void main() {
             s_out = sum > 0.0 ? dot(w, ss) / sum : s_in;
 #endif
             if (composite(acc, t_in, s_in, t_out, s_out, win, per_t)) break;
-            link = tet_link(tet, k);
             if (link.x < 0) {
                 status = STATUS_REENTER;
                 // Its place on the face it leaves by, from the weights of that face's points.

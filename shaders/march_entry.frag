@@ -10,7 +10,7 @@
 // rounding tolerance) nor the face it entered by last. RIM 1: as NEAR_CELLS 0 for a face
 // drawn as a rectangle round its projection (tetvr.mesh.records.rim_faces), whose fragments
 // are kept only where the pixel's ray, in float64, enters the triangle v_c0..2 (wound
-// counter-clockwise seen from outside; Moller-Trumbore, closed, as the reference decides).
+// counter-clockwise seen from outside; its edges by the reference's tie rule, edge_inside).
 // LIST 1 (the first layer's faces, not PEEL): every face that passes is also listed for the
 // pixel, (t's float bits, v_id), up to LIST_LENGTH of them (u_list: entry i of pixel (x, y)
 // at (x, y + i * height); u_count their number, counted on past the length: u_overflow
@@ -38,6 +38,19 @@ void pixel_ray_d(vec2 xy, out dvec3 o_obj, out dvec3 d_obj) {
     o_obj = (u_inv_view_d * dvec4(r, 0.0LF, 1.0LF)).xyz;
     d_obj = dmat3(u_inv_view_d) * dvec3(0.0LF, 0.0LF, -1.0LF);
 #endif
+}
+
+// Whether the ray (o, d), entering the face, passes on the inner side of its edge (p, q)
+// (counter-clockwise seen from outside). A ray through the edge itself is given the side
+// the reference gives it (tetvr.reference.segments): its origin moved by (e, e^2, e^3)
+// along the eye's x, y and z for an infinitesimal e, so that of two faces sharing the
+// edge exactly one takes the ray, and a ray in the plane of a face seen edge-on is in the
+// mesh exactly where the reference has it.
+bool edge_inside(dvec3 p, dvec3 q, dvec3 o, dvec3 d) {
+    double e = dot(d, cross(p - o, q - o));
+    dvec3 turn = cross(q - p, d);  // the edge function changes by -dot(axis, turn) per unit move
+    for (int i = 0; i < 3 && e == 0.0LF; ++i) e = -dot(u_inv_view_d[i].xyz, turn);
+    return e < 0.0LF;
 }
 #endif
 layout(location = 0) out int f_entry;
@@ -72,9 +85,9 @@ void main() {
     dvec3 p = cross(dd, e2);
     double det = dot(e1, p);  // -d . (e1 x e2): positive where the ray enters
     if (!(det > 0.0LF)) discard;  // faces away, or the ray runs in its plane
+    if (!(edge_inside(v_c0, v_c1, od, dd) && edge_inside(v_c1, v_c2, od, dd) && edge_inside(v_c2, v_c0, od, dd)))
+        discard;
     dvec3 s = od - v_c0, q = cross(s, e1);
-    double u = dot(s, p), v = dot(dd, q);
-    if (u < 0.0LF || v < 0.0LF || u + v > det) discard;
     float t = float(dot(e2, q) / det);
 #else
     vec4 plane = face_plane(v_id >> 2, v_id & 3);
