@@ -28,8 +28,11 @@ TETS_DATA = SHARED_DATA / "tets"
 
 #: Synthetic cubes: cube(n) has 6 n^3 tets (~10k, 105k, 329k, 998k).
 CUBE_NS = (12, 26, 38, 55)
-#: Real meshes (file in TETS_DATA, point field), used when they are there.
-REAL_MESHES = (("bluntfin_tets.vtu", "Density"), ("combustor_tets.vtu", "Density"))
+#: Real meshes (file in TETS_DATA, point field), used when they are there: two structured
+#: CFD grids split into tets, and two unstructured FEM meshes from SimVascular (the pipe's
+#: points come in no spatial order; the beam is small and stretched).
+REAL_MESHES = (("bluntfin_tets.vtu", "Density"), ("combustor_tets.vtu", "Density"),
+               ("pipe_flow_init_flow.vtu", "Pressure"), ("beam_tet4_result_100.vtu", "VonMises_stress"))
 #: ``--quick`` keeps the meshes up to this many tets.
 QUICK_MAX_TETS = 330_000
 

@@ -416,7 +416,56 @@ def imperfect_meshes() -> str:
             f"({r['date']}, `bench/results/imperfect.json`, by `bench/imperfect.py`).\n\n" + "\n".join(rows))
 
 
-TABLES: dict[str, Callable[[], str]] = {"imperfect_meshes": imperfect_meshes, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
+_FRAME_KINDS = {"raymarch": 'tet marching (`method="auto"` on this mesh, `"raymarch"`)',
+                "projected": 'projected tetrahedra (`method="projected"`)',
+                "raycast": "the volume ray caster (`tetvr.gl.Raycaster`)",
+                "annotate": "`tetvr render`'s picture: legend and PNG, beyond the frame",
+                "png": "the plain PNG (`--no-annotations`), beyond the frame"}
+
+
+def frame_memory() -> str:
+    """docs/limits.md: the host memory one frame adds per pixel, per method and for its
+    picture, and per tet, measured (bench/frame_memory.py) beside the estimate
+    tetvr.gl.framesize refuses frames by."""
+    sys.path.insert(0, str(ROOT))
+    from tetvr.gl import framesize as fs
+
+    r = _load("frame_memory.json")
+    rows = ["| what | measured: bytes a pixel | at the largest size | estimate: bytes a pixel |",
+            "|---|---:|---:|---:|"]
+    for kind, label in _FRAME_KINDS.items():
+        m = r["per_pixel"][kind]
+        last = m["rows"][-1]
+        if kind in fs.TARGET_BYTES_PER_PIXEL:
+            per_px, fixed = fs.TARGET_BYTES_PER_PIXEL[kind] + fs.READBACK_BYTES_PER_PIXEL, fs.FRAME_FIXED_BYTES
+        else:
+            per_px = fs.PICTURE_BYTES_PER_PIXEL[kind]
+            fixed = fs.PNG_BLOCK_BYTES if kind == "png" else fs.ANNOTATE_FIXED_BYTES
+        rows.append(f"| {label} | {m['rss_bytes_per_pixel']:.1f} | {last['rss_added'] / 2**20:.0f} MiB at "
+                    f"{last['size'][0]}x{last['size'][1]} | {per_px} + {fixed >> 20} MiB |")
+    c = r["context"]
+    rows.append(f"| a renderer: its GL context and first small frame | | {c['rss_added'] / 2**20:.0f} MiB "
+                f"({c['address_space_added'] / 2**20:.0f} MiB of address space) | {fs.CONTEXT_BYTES >> 20} MiB "
+                f"({fs.CONTEXT_ADDRESS_SPACE >> 20} MiB of address space) |")
+    tets = ["| method | mesh: bytes a tet | one frame adds: bytes a tet |", "|---|---:|---:|"]
+    for kind in ("raymarch", "projected"):
+        m = r["per_tet"][kind]
+        tets.append(f"| {_FRAME_KINDS[kind].split(' (')[0]} | {m['mesh_bytes_per_tet']:.0f} "
+                    f"| {m['frame_rss_bytes_per_tet']:.0f} |")
+    sizes = ", ".join(f"{s}x{s}" for s in r["sizes"])
+    n_tets = " and ".join(f"{row['n_tets']:,}" for row in r["per_tet"]["raymarch"]["rows"])
+    png_sizes = ", ".join(f"{row['size'][0]}x{row['size'][1]}" for row in r["per_pixel"]["png"]["rows"])
+    return (f"Measured by `bench/frame_memory.py` on {r['gl_renderer']} ({r['date']}, "
+            f"`bench/results/frame_memory.json`): what one frame adds to a warm process's peak resident memory, "
+            f"fitted over {sizes} (the PNG over {png_sizes}, "
+            f"past its block of rows); the estimate is `tetvr.gl.framesize`'s on a GL that keeps its "
+            f"targets in host memory.\n\n" + "\n".join(rows)
+            + f"\n\nPer tet, on cubes of {n_tets} tets at 256x256: what the mesh holds, and what its first "
+              "frame adds (tet marching's records and walk checks, projected tetrahedra's buffers and sort).\n\n"
+            + "\n".join(tets))
+
+
+TABLES: dict[str, Callable[[], str]] = {"imperfect_meshes": imperfect_meshes, "frame_memory": frame_memory, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
                                         "compare_demo": compare_demo,
                                         "viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages,
                                         "volume_accuracy": volume_accuracy,

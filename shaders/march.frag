@@ -101,6 +101,9 @@ uniform float u_tolerance;
 // across the ray, the ray is as close to them as to that edge; elsewhere the rasteriser
 // listed any face the ray enters beside it, and every ray's last exit would pay for the test.
 #define NEAR_EDGE 0.02
+// A face whose projection across the ray has less area than this fraction of its longest
+// edge squared is taken as seen edge-on (the ray in its plane, to a rounding).
+#define EDGE_ON_AREA 1.0e-4
 uniform int u_max_steps;      // bound on tets per ray and layer (a walk caught by rounding)
 // Most tets a ray walks by face planes before it walks by points (see main).
 #define PLANE_STEPS 8
@@ -114,6 +117,21 @@ int g_copies = 1;
 #else
 #define COPIES_OF(t)
 #endif
+
+// The frame's check of itself: the pixels whose walk went wrong (a step bound reached, no
+// face ahead of the ray, an exit behind its entry) are counted and listed (the first
+// SUSPECT_LENGTH), for tetvr.gl.selfcheck to trace again on the CPU.
+layout(std430, binding = SUSPECT_BUFFER) restrict buffer Suspect { uint u_suspects; uint u_suspect[]; };
+uniform float u_slack;  // length an exit may lie behind its entry by rounding alone
+
+bool g_suspect = false;  // this ray listed already
+
+void suspect(ivec2 px) {
+    if (g_suspect) return;
+    g_suspect = true;
+    uint i = atomicAdd(u_suspects, 1u);
+    if (i < uint(SUSPECT_LENGTH)) u_suspect[i] = uint(px.y) * uint(u_viewport.x) + uint(px.x);
+}
 
 layout(location = 0) out vec4 f_color;
 layout(location = 1) out vec2 f_state;
@@ -321,6 +339,7 @@ void main() {
     bool near_edge = true;  // where the ray left the mesh: beside an edge of that face (see LIST below)
     ivec4 link;
     int k = 0;
+    bool ended = false;  // the walk stopped as it should: opaque, at its window's end, out of the mesh
     for (int step = 0; step < PLANE_STEPS && step < u_max_steps; ++step) {
         float t_exit = 3.0e38;
         int exit_face = -1;
@@ -336,9 +355,11 @@ void main() {
         if (exit_face < 0) break;  // no face ahead: only rounding on a degenerate ray does this
         t_out = max(t_exit, t_in);
         s_out = dot(g.xyz, o + t_out * d) + g.w;
-        if (composite(acc, t_in, s_in, t_out, s_out, win, per_t)) break;
+        ended = composite(acc, t_in, s_in, t_out, s_out, win, per_t);
+        if (ended) break;
         k = exit_face;
         link = tet_link(tet, k);
+        ended = link.x < 0;
         if (link.x < 0) {
             status = STATUS_REENTER;
             break;
@@ -384,6 +405,7 @@ void main() {
     }
     if (by_points) {
         status = STATUS_DONE;
+        ended = false;
         for (int step = 1; step < u_max_steps; ++step) {
             // Into the next tet by its face f: the slots there of the triangle's points.
             int f = link.x & 3;
@@ -446,20 +468,46 @@ void main() {
             pa = p0; pb = p1; pc = pn;
             vec3 w = max(E, 0.0);
             float sum = w.x + w.y + w.z;
-            t_out = max(sum > 0.0 ? dot(w, ts) / sum : t_in, t_in);
+            float t_w = sum > 0.0 ? dot(w, ts) / sum : t_in;
+            t_out = max(t_w, t_in);
 #if CELL_DATA
             s_out = s_in;
 #else
             s_out = sum > 0.0 ? dot(w, ss) / sum : s_in;
 #endif
-            if (composite(acc, t_in, s_in, t_out, s_out, win, per_t)) break;
+            vec2 u0 = p1 - p0, u1 = pn - p1, u2 = p0 - pn;
+            if (sum <= EDGE_ON_AREA * max(dot(u0, u0), max(dot(u1, u1), dot(u2, u2)))) {
+                // The exit face is seen (almost) edge-on: the ray runs in its plane, where
+                // the weights of its points are rounding and their point lies off the ray.
+                // The tet's other planes say where the ray leaves it, and its field the
+                // scalar there.
+                float t_exit = 3.0e38;
+                for (int j = 0; j < 4; ++j) {
+                    vec4 plane = face_plane(tet, j);
+                    float den = dot(plane.xyz, d);
+                    if (den > GRAZING * per_t) t_exit = min(t_exit, -(dot(plane.xyz, o) + plane.w) / den);
+                }
+                if (t_exit < 3.0e38) {
+                    t_w = t_exit;
+                    t_out = max(t_exit, t_in);
+#if !CELL_DATA
+                    vec4 gt = tet_scalar(tet);
+                    s_out = dot(gt.xyz, o + t_out * d) + gt.w;
+#endif
+                }
+            }
+            if ((t_in - t_w) * per_t > u_slack) suspect(px);  // the exit behind the entry: not this tet's
+            ended = composite(acc, t_in, s_in, t_out, s_out, win, per_t);
+            if (ended) break;
             if (link.x < 0) {
+                ended = true;
                 status = STATUS_REENTER;
                 // Its place on the face it leaves by, from the weights of that face's points.
                 near_edge = min(w.x, min(w.y, w.z)) <= NEAR_EDGE * sum;
                 break;
             }
         }
+        if (!ended) suspect(px);  // the step bound reached
         if (status == STATUS_REENTER) {
             // Out of the mesh by face k: where, by its plane, as the next entry pass finds
             // the faces it may enter by (march_entry.frag), so that a face that coincides
@@ -469,6 +517,8 @@ void main() {
             float den = dot(plane.xyz, d);
             if (den > 0.0) t_out = max(-(dot(plane.xyz, o) + plane.w) / den, t_in);
         }
+    } else if (!ended) {
+        suspect(px);  // no face ahead, or the step bound reached
     }
 #if LIST
     f_last = -1;

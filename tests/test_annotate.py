@@ -188,16 +188,16 @@ def test_as_mesh_refuses_what_it_cannot_use():
 
 def test_cli_renders_a_mesh_file_with_a_legend(tmp_path, capsys):
     out = tmp_path / "o.png"
-    argv = ["render", str(POST_VTK), "--scalars", "Pressure", "--cmap", "magma", "--size", "64x48",
+    argv = ["render", str(POST_VTK), "--scalars", "Pressure", "--cmap", "magma", "--size", "320x240",
             "--background", "white", "-o", str(out), "--reference", "--npy", str(tmp_path / "o")]
     assert main(argv) == 0
     assert "annotated PNG" in capsys.readouterr().out
     got = decode(out.read_bytes())
-    assert got.shape[0] == 48 and got.shape[1] > 64
-    image = np.load(tmp_path / "o.npy")  # the exact float image, as rendered
-    assert image.shape == (48, 64, 4) and image[..., 3].max() > 0.2
+    assert got.shape[:2] == (240, 320)  # the size asked for, the legend inside it
+    image = np.load(tmp_path / "o.npy")  # the exact float image, as rendered: left of the legend
+    assert image.shape[0] == 240 and 160 <= image.shape[1] < 320 and image[..., 3].max() > 0.2
     assert main(argv[:-3] + ["--reference", "--no-annotations"]) == 0
-    assert decode(out.read_bytes()).shape == (48, 64, 4)
+    assert decode(out.read_bytes()).shape == (240, 320, 4)
 
 
 def test_cli_without_matplotlib_writes_the_plain_picture(tmp_path, capsys, monkeypatch):
@@ -260,7 +260,7 @@ def test_cli_info_on_a_volume(capsys):
     (-0.5, 0.5, ["-0.4", "-0.2", "0.0", "0.2", "0.4"]),
 ])
 def test_legend_tick_labels_are_in_data_units_and_evenly_spaced(lo, hi, want):
-    from tetvr.apps.annotate import _tick_labels
+    from tetvr.apps.legend import _tick_labels
 
     ticks, labels = _tick_labels(lo, hi)
     assert labels == want

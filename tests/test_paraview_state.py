@@ -278,7 +278,7 @@ def test_scene_camera_without_clipping_range_sees_the_mesh():
 
 def test_warns_when_the_clipping_range_clips_everything():
     mesh = tetvr.read(MESHES / "post.vtk")
-    cam = Camera(position=(0, 0, 2000), view_angle=0.5)  # the default range ends at 1000
+    cam = Camera(position=(0, 0, 2000), view_angle=0.5, clipping_range=(0.01, 1000))  # ends at 1000
     with pytest.warns(UserWarning, match=r"clipping_range \(0.01, 1000\) clips all the data away: the data's depth "
                                          r"extent along the view is 1998.87 .. 2000, all of it beyond the far plane"):
         image = tetvr.render(mesh, camera=cam, size=(8, 8), method="reference")

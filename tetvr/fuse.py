@@ -40,7 +40,7 @@ from typing import Any, Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tetvr.core.camera import Camera
+from tetvr.core.camera import Camera, resolve_clipping_range, union_bounds
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.reference.volume import RaycastSettings, render_volume_reference, volume_ray_intervals
 from tetvr.optics.transfer import TransferFunction
@@ -227,6 +227,7 @@ def fuse(
     from tetvr.gl.renderer import Renderer
 
     _check_ray_textures(ray_textures, size)
+    camera = resolve_clipping_range(camera, union_bounds(mesh.bounds, volume.bounds))  # one range for both
     own_r = renderer is None
     r = renderer or Renderer()
     own_c = raycaster is None
@@ -269,6 +270,7 @@ def fuse_reference(
     from tetvr.reference.segments import ray_segments
 
     _check_ray_textures(ray_textures, size)
+    camera = resolve_clipping_range(camera, union_bounds(mesh.bounds, volume.bounds))  # one range for both
     image = render_reference(mesh, camera, mesh_tf, size)
     if mesh_extent is None:
         seg = ray_segments(mesh, camera, size)

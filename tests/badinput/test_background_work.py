@@ -14,6 +14,7 @@ import pytest
 
 import tetvr
 import tetvr.gl.renderer as renderer_module
+import tetvr.order.method as method_module
 from tetvr import Camera, RenderSettings
 from tetvr.gl import raymarch
 from tetvr.mesh import synthetic
@@ -24,7 +25,9 @@ pytestmark = pytest.mark.gl
 
 def test_no_records_are_built_for_a_mesh_auto_sends_to_projected_tetrahedra(monkeypatch):
     mesh = synthetic.cube(3)
-    monkeypatch.setattr(renderer_module, "AUTO_MAX_TETS", mesh.n_tets - 1)
+    too_large = lambda n_tets: n_tets < mesh.n_tets  # noqa: E731 - its records would not fit in memory
+    monkeypatch.setattr(renderer_module, "march_fits", too_large)
+    monkeypatch.setattr(method_module, "march_fits", too_large)
     started = []
     monkeypatch.setattr(raymarch, "_prefetch", lambda m: started.append(m))
     with tetvr.Renderer(RenderSettings()) as r:

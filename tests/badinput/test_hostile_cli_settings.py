@@ -232,7 +232,8 @@ def test_check_size_bounds_host_memory(monkeypatch):
     from tetvr.gl.util import check_size
 
     monkeypatch.setattr(image_mod, "available_memory", lambda: 1 << 20)
-    with pytest.raises(MemoryError, match=r"rendering a 1024x1024 image .* needs about 32 MiB of memory; 1 MiB"):
+    with pytest.raises(MemoryError, match=r"a frame of 1024x1024 pixels .* needs about 64 MiB of host memory .*"
+                                          r"more than the 1 MiB this process may take"):
         check_size((1024, 1024), _FakeContext())
 
 
@@ -366,7 +367,8 @@ def test_cli_reference_too_big_for_memory_exits_4(scene_dir, capsys):
     scene = scene_dir / "scene.json"
     scene.write_text(json.dumps({"mesh": "post.vtk", "size": [100000, 100000]}))
     assert main(["render", str(scene), "-o", str(scene_dir / "o.png"), "--reference"]) == EXIT_MEMORY
-    assert "100000x100000 reference image" in _one_error_line(capsys.readouterr().err)
+    # The picture's memory is checked before the reference renders (tetvr.gl.framesize).
+    assert "a frame of 100000x100000 pixels (its picture" in _one_error_line(capsys.readouterr().err)
     assert not (scene_dir / "o.png").exists()
 
 

@@ -6,9 +6,13 @@ The rendered float image is never changed: :func:`annotate` draws it pixel for p
 annotated PNG is a separate product. :func:`plot` is the one-liner that reads, renders
 and annotates, returning a :class:`Picture` that displays itself in Jupyter.
 
-The legend shows the colour map over the transfer function's range with ticks in the
-field's units, and beside it the opacity curve (opacity per unit distance, the value a
-slab ``unit_distance`` thick reaches), so a reader can tell which values are see-through.
+The legend (:mod:`tetvr.apps.legend`) shows the colour map over the transfer function's
+range with ticks in the field's units and both ends labelled, triangles at the ends the
+data runs past (clipped), and beside it the opacity curve (opacity per unit distance, the
+value a slab ``unit_distance`` thick reaches), so a reader can tell which values are
+see-through. A constant field's legend says so. The picture is laid out around the render,
+or inside a given size (:func:`render_area`); :func:`frame` fits a camera that keeps the
+outline in view.
 
 matplotlib is an optional dependency (``pip install tetvr[plot]``); nothing here imports
 it until a picture is annotated.
@@ -24,12 +28,13 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tetvr.core.camera import Camera
-from tetvr.core.image import DEFAULT_BACKGROUND, atomic_output, composite_over, to_rgba8
+from tetvr.apps.legend import DPI, draw_legend, field_label, plan
+from tetvr.core.camera import Camera, resolve_clipping_range
+from tetvr.core.image import DEFAULT_BACKGROUND, atomic_output, composite_over, image_size, to_rgba8
 from tetvr.core.outputs import check_outputs, check_writable
 from tetvr.optics.transfer import TransferFunction
 
-__all__ = ["Picture", "annotate", "panels", "plot", "show", "as_mesh"]
+__all__ = ["Framed", "Picture", "annotate", "frame", "mesh_labels", "panels", "plot", "render_area", "show", "as_mesh"]
 
 _AXIS_COLOURS = ("#d62728", "#2ca02c", "#1f77b4")  # x, y, z: red, green, blue as ParaView and VTK draw them
 
@@ -97,6 +102,7 @@ def _project_px(camera: Camera, points: ArrayLike, size: tuple[int, int]) -> tup
     whether each lies in front of the camera."""
     w, h = size
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    camera = resolve_clipping_range(camera, pts)  # x and y do not depend on it; the matrix needs one
     p = np.c_[pts, np.ones(len(pts))]
     clip = p @ (camera.projection_matrix(w / h) @ camera.view_matrix()).T
     front = clip[:, 3] > 1e-12 * np.abs(clip).max()
@@ -104,103 +110,45 @@ def _project_px(camera: Camera, points: ArrayLike, size: tuple[int, int]) -> tup
     return np.c_[(ndc[:, 0] + 1) * 0.5 * w, (1 - ndc[:, 1]) * 0.5 * h], front
 
 
-def _ticks(lo: float, hi: float) -> NDArray[np.float64]:
-    _matplotlib()
-    from matplotlib.ticker import MaxNLocator
-
-    t = np.asarray(MaxNLocator(nbins=6).tick_values(lo, hi))
-    span = hi - lo
-    return t[(t >= lo - 1e-9 * span) & (t <= hi + 1e-9 * span)]
-
-
-def annotate(
-    image: ArrayLike,
-    tf: TransferFunction,
-    *,
-    field: str | None = None,
-    units: str | None = None,
-    title: str | None = None,
-    camera: Camera | None = None,
-    bounds: ArrayLike | None = None,
-    legend: bool = True,
-    triad: bool = True,
-    outline: bool = True,
-    background: Sequence[float] | None = DEFAULT_BACKGROUND,
-) -> bytes:
-    """The annotated PNG of a rendered image, as bytes.
-
-    Parameters
-    ----------
-    image : premultiplied float RGBA, (H, W, 4), as :func:`tetvr.render` returns it;
-        drawn pixel for pixel.
-    tf : the transfer function it was rendered with (the legend's colours, opacity, range).
-    field, units : the legend's label: ``"Density [kg/m^3]"``.
-    title : a line above the picture.
-    camera : the camera it was rendered with; needed for the triad and the outline.
-    bounds : the ``(2, 3)`` box to outline (the mesh's bounds).
-    legend, triad, outline : which annotations to draw.
-    background : composited under the image (``None``: keep it translucent).
-
-    Examples
-    --------
-    >>> png = annotate(tetvr.render(mesh), tf, field="T", camera=cam, bounds=mesh.bounds)  # doctest: +SKIP
-    """
-    _, Figure, FigureCanvasAgg = _matplotlib()
-    img = np.asarray(image)
-    if img.ndim != 3 or img.shape[2] != 4:
-        raise ValueError(f"image must have shape (H, W, 4), got {img.shape}")
-    if not isinstance(tf, TransferFunction):
-        raise TypeError(f"tf must be a TransferFunction, got {type(tf).__name__}")
-    h, w = img.shape[:2]
-    size = (w, h)
-    rgba = to_rgba8(composite_over(img, background))
-    ink = _text_colour(background)
-    face = "none" if background is None else tuple(float(v) for v in background)
-    dpi = 100.0
-    # Type scaled to the picture, within what stays readable: 11 pt on a 512-pixel-high picture.
-    font = float(np.clip(h / 512.0 * 11.0, 7.0, 16.0))
-    label = _legend_label(field, units)
-    legend_w = _legend_width(tf, label, font, dpi) if legend else 0
-    title_h = int(round(font * 2.2 * dpi / 72.0)) if title else 0
-    fw, fh = w + legend_w, h + title_h
-    fig = Figure(figsize=(fw / dpi, fh / dpi), dpi=dpi, facecolor=face)
-    FigureCanvasAgg(fig)
-    ax = fig.add_axes((0.0, 0.0, w / fw, h / fh))
-    ax.imshow(rgba, interpolation="none", extent=(0, w, h, 0), resample=False)
-    ax.set_xlim(0, w)
-    ax.set_ylim(h, 0)
-    ax.set_axis_off()
-    if title:
-        fig.text(0.5 * w / fw, 1.0 - 0.5 * title_h / fh, title, ha="center", va="center", color=ink,
-                 fontsize=font * 1.2, fontweight="bold")
-    if outline and camera is not None and bounds is not None:
-        _draw_outline(ax, camera, bounds, size, ink)
-    if triad and camera is not None:
-        _draw_triad(ax, camera, size, font, ink)
-    if legend:
-        _draw_legend(fig, tf, (w, fw, h, fh), font, ink, label)
-    out = io.BytesIO()
-    fig.savefig(out, format="png", dpi=dpi, facecolor=face, transparent=background is None)
-    return out.getvalue()
-
-
-def _draw_outline(ax: Any, camera: Camera, bounds: ArrayLike, size: tuple[int, int], ink: str) -> None:
+def _outline(camera: Camera, bounds: ArrayLike, size: tuple[int, int]) -> list[NDArray[np.float64]]:
+    """The box's edges in the picture: (2, 2) pixel end points each (the edges in front of the camera)."""
     lo, hi = np.asarray(bounds, dtype=np.float64).reshape(2, 3)
     corners = np.array([[(lo, hi)[i >> k & 1][k] for k in range(3)] for i in range(8)])
     px, front = _project_px(camera, corners, size)
-    for i in range(8):
-        for k in range(3):
-            j = i | (1 << k)
-            if j != i and front[i] and front[j]:
-                ax.plot(px[[i, j], 0], px[[i, j], 1], color=ink, alpha=0.35, linewidth=0.8, solid_capstyle="round")
+    return [px[[i, i | (1 << k)]] for i in range(8) for k in range(3)
+            if i | (1 << k) != i and front[i] and front[i | (1 << k)]]
 
 
-def _draw_triad(ax: Any, camera: Camera, size: tuple[int, int], font: float, ink: str) -> None:
-    """World x, y, z as seen by the camera, in the lower-left corner (directions only)."""
+def _triad_length(size: tuple[int, int]) -> float:
+    return 0.07 * min(size) + 8
+
+
+def _triad_origin(alpha: NDArray[Any], edges: list[NDArray[np.float64]], size: tuple[int, int]) -> tuple[float, float]:
+    """Where the triad goes: the lower-left corner (ParaView's), unless another corner is
+    clearly emptier (less than half the ink: the data's opacity and the outline's edges in
+    the square the triad takes)."""
     w, h = size
+    length = _triad_length(size)
+    r = 1.35 * length + 4  # room for an axis and its label on every side
+    t = np.linspace(0.0, 1.0, 64)[:, None]
+    samples = np.concatenate([e[0] + t * (e[1] - e[0]) for e in edges] + [np.empty((0, 2))])
+    # An edge is a line a pixel wide drawn at opacity 0.35: each sample stands for 1/64 of it.
+    weight = np.concatenate([np.full(64, 0.35 * float(np.linalg.norm(e[1] - e[0])) / 64) for e in edges] + [[]])
+    best, origin = np.inf, (r, h - r)
+    for ox, oy in ((r, h - r), (w - r, h - r), (r, r), (w - r, r)):
+        x0, x1, y0, y1 = (max(int(v), 0) for v in (ox - r, ox + r, oy - r, oy + r))
+        inside = (np.abs(samples[:, 0] - ox) < r) & (np.abs(samples[:, 1] - oy) < r)
+        ink = float(alpha[y0:y1, x0:x1].sum()) + float(weight[inside].sum())
+        if ink < 0.5 * best:
+            best, origin = ink, (ox, oy)
+    return origin
+
+
+def _draw_triad(ax: Any, camera: Camera, size: tuple[int, int], font: float, origin: tuple[float, float]) -> None:
+    """World x, y, z as seen by the camera, about ``origin`` (directions only)."""
     right, up, back = camera.basis()
-    length = 0.07 * min(w, h) + 8
-    ox, oy = 1.35 * length + 4, h - 1.35 * length - 4  # room for an axis and its label on every side
+    length = _triad_length(size)
+    ox, oy = origin
     # The axes pointing away from the viewer are drawn first, so nearer ones are on top.
     for k in np.argsort([back[k] for k in range(3)]):
         dx, dy = right[k] * length, -up[k] * length
@@ -213,101 +161,157 @@ def _draw_triad(ax: Any, camera: Camera, size: tuple[int, int], font: float, ink
                 fontweight="bold")
 
 
-def _legend_label(field: str | None, units: str | None) -> str:
-    return (field or "scalars") + (f" [{units}]" if units else "")
+def annotate(
+    image: ArrayLike,
+    tf: TransferFunction,
+    *,
+    field: str | None = None,
+    units: str | None = None,
+    title: str | None = None,
+    camera: Camera | None = None,
+    bounds: ArrayLike | None = None,
+    data_range: tuple[float, float] | None = None,
+    size: tuple[int, int] | None = None,
+    legend: bool = True,
+    triad: bool = True,
+    outline: bool = True,
+    background: Sequence[float] | None = DEFAULT_BACKGROUND,
+) -> bytes:
+    """The annotated PNG of a rendered image, as bytes.
 
+    Parameters
+    ----------
+    image : premultiplied float RGBA, (H, W, 4), as :func:`tetvr.render` returns it;
+        drawn pixel for pixel.
+    tf : the transfer function it was rendered with (the legend's colours, opacity, range).
+    field, units : the legend's label: ``"Density [kg/m^3]"`` (:func:`mesh_labels` gives
+        a mesh's, ``"|Velocity|"`` for a vector field's magnitude).
+    title : a line above the picture.
+    camera : the camera it was rendered with; needed for the triad and the outline.
+    bounds : the ``(2, 3)`` box to outline (the mesh's bounds).
+    data_range : the field's own ``(min, max)``: the colour bar marks the ends the data
+        runs past (drawn in the end colours), and a constant field's legend says
+        ``constant 1.0`` instead of inventing a range.
+    size : the whole picture's (width, height); ``image`` must then be the render area
+        :func:`render_area` gives for it. Default: the picture is ``image`` with the
+        legend to its right and the title above.
+    legend, triad, outline : which annotations to draw.
+    background : composited under the image (``None``: keep it translucent).
 
-def _tick_labels(lo: float, hi: float) -> tuple[NDArray[np.float64], list[str]]:
-    """Ticks across ``lo .. hi`` and their labels, with as many digits as the step needs
-    (scientific notation outside 1e-3 .. 1e5).
-
-    >>> _tick_labels(0.0, 1.0)[1], _tick_labels(0.1, 0.8)[1]
-    (['0.0', '0.2', '0.4', '0.6', '0.8', '1.0'], ['0.15', '0.30', '0.45', '0.60', '0.75'])
+    Examples
+    --------
+    >>> png = annotate(tetvr.render(mesh), tf, camera=cam, **mesh_labels(mesh))  # doctest: +SKIP
     """
-    ticks = _ticks(lo, hi)
-    if len(ticks) < 2:
-        return ticks, [f"{t:.4g}" for t in ticks]
-    step = float(np.min(np.diff(ticks)))
-    big = float(np.abs(ticks).max())
-    if 1e-3 <= big < 1e5 or big == 0.0:
-        decimals = max(0, int(-np.floor(np.log10(step) + 1e-9)))
-        while decimals < 12 and any(abs(float(f"{t:.{decimals}f}") - t) > 1e-6 * step for t in ticks):
-            decimals += 1  # a step of 0.15 needs two decimals
-        labels = [f"{t:.{decimals}f}" for t in ticks]
-    else:
-        digits = max(0, int(np.floor(np.log10(big) + 1e-9) - np.floor(np.log10(step) + 1e-9)))
-        while digits < 12 and any(abs(float(f"{t:.{digits}e}") - t) > 1e-6 * step for t in ticks):
-            digits += 1
-        labels = [f"{t:.{digits}e}" for t in ticks]
-    return ticks, [("0" if float(lab) == 0.0 and lab.startswith("-") else lab) for lab in labels]
+    fig = _figure(image, tf, field=field, units=units, title=title, camera=camera, bounds=bounds,
+                  data_range=data_range, size=size, legend=legend, triad=triad, outline=outline,
+                  background=background)
+    out = io.BytesIO()
+    fig.savefig(out, format="png", dpi=fig.dpi, facecolor=fig.get_facecolor(), transparent=background is None)
+    return out.getvalue()
 
 
-def _text_width(text: str, size: float, dpi: float, bold: bool = False) -> float:
-    """Width in pixels of ``text`` as matplotlib draws it."""
-    from matplotlib.font_manager import FontProperties
-    from matplotlib.textpath import TextToPath
+def _figure(image: ArrayLike, tf: TransferFunction, *, field: str | None, units: str | None, title: str | None,
+            camera: Camera | None, bounds: ArrayLike | None, data_range: tuple[float, float] | None,
+            size: tuple[int, int] | None, legend: bool, triad: bool, outline: bool,
+            background: Sequence[float] | None) -> Any:
+    """:func:`annotate`'s matplotlib figure."""
+    _, Figure, FigureCanvasAgg = _matplotlib()
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] != 4:
+        raise ValueError(f"image must have shape (H, W, 4), got {img.shape}")
+    if not isinstance(tf, TransferFunction):
+        raise TypeError(f"tf must be a TransferFunction, got {type(tf).__name__}")
+    h, w = img.shape[:2]
+    label = field_label(field, units)
+    layout = plan(tf, label, title=title, legend=legend,
+                  **({"image": (w, h)} if size is None else {"size": image_size(size)}))
+    if layout.area != (w, h):
+        raise ValueError(f"image is {w}x{h} pixels, but a {layout.picture[0]}x{layout.picture[1]} picture with "
+                         f"this legend and title holds a {layout.area[0]}x{layout.area[1]} render "
+                         "(render_area gives it)")
+    ink = _text_colour(background)
+    face = "none" if background is None else tuple(float(v) for v in background)
+    fw, fh = layout.picture
+    fig = Figure(figsize=(fw / DPI, fh / DPI), dpi=DPI, facecolor=face)
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.0, 0.0, w / fw, h / fh))
+    ax.imshow(to_rgba8(composite_over(img, background)), interpolation="none", extent=(0, w, h, 0), resample=False)
+    ax.set_xlim(0, w)
+    ax.set_ylim(h, 0)
+    ax.set_axis_off()
+    if title and layout.title_h:
+        fig.text(0.5 * w / fw, 1.0 - 0.5 * layout.title_h / fh, title, ha="center", va="center", color=ink,
+                 fontsize=layout.font * 1.2, fontweight="bold")
+    edges = _outline(camera, bounds, (w, h)) if outline and camera is not None and bounds is not None else []
+    for e in edges:
+        ax.plot(e[:, 0], e[:, 1], color=ink, alpha=0.35, linewidth=0.8, solid_capstyle="round")
+    if triad and camera is not None:
+        _draw_triad(ax, camera, (w, h), layout.font, _triad_origin(img[..., 3], edges, (w, h)))
+    if layout.legend_w:
+        draw_legend(fig, tf, layout, ink, label, data_range)
+    return fig
 
-    prop = FontProperties(size=size, weight="bold" if bold else "normal")
-    width, _, _ = TextToPath().get_text_width_height_descent(text, prop, ismath=False)
-    return width * dpi / 72.0
+
+def mesh_labels(mesh: Any) -> dict[str, Any]:
+    """What :func:`annotate` reads off a mesh: the legend's ``field`` (``"|Velocity|"`` for
+    a vector field's magnitude, ``"Velocity[1]"`` for a component), the ``bounds`` to
+    outline and the field's ``data_range``.
+
+    >>> from tetvr.mesh import synthetic
+    >>> sorted(mesh_labels(synthetic.cube(1)))
+    ['bounds', 'data_range', 'field']
+    """
+    scalar_of = getattr(getattr(mesh, "report", None), "scalar_of", "")
+    name = field_label(mesh.scalar_name, None, scalar_of) if scalar_of else mesh.scalar_name
+    return {"field": name, "bounds": mesh.bounds, "data_range": mesh.scalar_range}
 
 
-def _legend_parts(font: float, dpi: float) -> tuple[float, float, float]:
-    """Pixel widths of the gap, the colour bar and the opacity curve."""
-    pt = dpi / 72.0
-    return 0.5 * font * pt, 1.6 * font * pt, 2.6 * font * pt
+def render_area(size: tuple[int, int], tf: TransferFunction, *, field: str | None = None, units: str | None = None,
+                title: str | None = None, legend: bool = True) -> tuple[int, int]:
+    """The (width, height) of the render inside an annotated picture of ``size``: what the
+    legend (to its right) and the title (above) leave. A legend or title that would take
+    more than half the picture is left out (:data:`tetvr.apps.legend.MIN_RENDER_SHARE`);
+    :func:`annotate` with the same arguments and ``size`` lays the picture out the same.
+
+    >>> from tetvr.optics.transfer import TransferFunction
+    >>> w, h = render_area((800, 600), TransferFunction.preset("viridis", (0.0, 1.0)), field="T")
+    >>> w < 800 and h == 600
+    True
+    """
+    _matplotlib()  # the legend is measured as matplotlib draws it
+    return plan(tf, field_label(field, units), size=image_size(size), title=title, legend=legend).area
 
 
-def _legend_width(tf: TransferFunction, label: str, font: float, dpi: float) -> int:
-    """The legend's width: its label, or tick labels + bar + opacity curve, whichever is wider."""
-    gap, bar_w, curve_w = _legend_parts(font, dpi)
-    _, labels = _tick_labels(*tf.domain)
-    ticks_w = max((_text_width(t, font * 0.85, dpi) for t in labels), default=0.0) + 6
-    body = ticks_w + bar_w + gap + curve_w + _text_width("0", font * 0.7, dpi)
-    return int(np.ceil(2 * gap + max(body, _text_width(label, font, dpi, bold=True))))
+def frame(mesh: Any, size: tuple[int, int], *, outline: bool = True, **fit: Any) -> Camera:
+    """A camera that frames ``mesh`` in a render of ``size`` (width, height), as
+    :meth:`Camera.fit` with the options ``fit``; with ``outline`` it frames the mesh's
+    bounding box too, so the outline :func:`annotate` draws stays in the picture.
+
+    >>> from tetvr.mesh import synthetic
+    >>> mesh = synthetic.cube(2)  # turned: its box is larger than its silhouette
+    >>> frame(mesh, (64, 48), parallel=True).parallel_scale > frame(mesh, (64, 48), outline=False,
+    ...                                                             parallel=True).parallel_scale
+    True
+    """
+    from tetvr.core.camera import _fit
+
+    w, h = image_size(size)
+    return _fit(Framed(mesh, outline), aspect=w / h, **fit)
 
 
-def _draw_legend(fig: Any, tf: TransferFunction, layout: tuple[int, int, int, int], font: float, ink: str,
-                 label: str) -> None:
-    """A colour bar over the transfer function's range with ticks in the field's units,
-    and the opacity curve beside it."""
-    w, fw, h, fh = layout
-    dpi = fig.dpi
-    lo, hi = tf.domain
-    gap, bar_w, curve_w = _legend_parts(font, dpi)
-    top, bottom = max(0.14 * h, 2.2 * font * dpi / 72.0), max(0.12 * h, 2.2 * font * dpi / 72.0)
-    hh = max(h - top - bottom, 1.0)
-    x0 = w + gap
-    fig.text(x0 / fw, (h - 0.5 * top) / fh, label, ha="left", va="center", color=ink, fontsize=font,
-             fontweight="bold")
-    ticks, labels = _tick_labels(lo, hi)
-    x_bar = x0 + max((_text_width(t, font * 0.85, dpi) for t in labels), default=0.0) + 6
-    s = np.linspace(lo, hi, 256)
-    rgb, alpha = tf.evaluate(s)
-    cax = fig.add_axes((x_bar / fw, bottom / fh, bar_w / fw, hh / fh))
-    cax.imshow(rgb[::-1, None, :], aspect="auto", extent=(0, 1, lo, hi), interpolation="nearest")
-    cax.set_xticks([])
-    cax.set_yticks(ticks, labels)
-    cax.yaxis.tick_left()
-    cax.tick_params(axis="y", colors=ink, labelsize=font * 0.85, length=3)
-    cax.set_ylim(lo, hi)
-    for spine in cax.spines.values():
-        spine.set_color(ink)
-        spine.set_linewidth(0.6)
-    oax = fig.add_axes(((x_bar + bar_w + 0.6 * gap) / fw, bottom / fh, curve_w / fw, hh / fh))
-    oax.fill_betweenx(s, 0, alpha, color=ink, alpha=0.12, linewidth=0)
-    oax.plot(alpha, s, color=ink, linewidth=1.2)
-    oax.set_ylim(lo, hi)
-    oax.set_xlim(0, 1.02)
-    oax.set_yticks([])
-    oax.set_xticks([0, 1])
-    oax.tick_params(axis="x", colors=ink, labelsize=font * 0.7, length=2)
-    oax.set_xlabel("opacity", color=ink, fontsize=font * 0.75, labelpad=1)
-    oax.patch.set_alpha(0.0)
-    for side, spine in oax.spines.items():
-        spine.set_visible(side in ("bottom", "left"))
-        spine.set_color(ink)
-        spine.set_linewidth(0.6)
+class Framed:
+    """What a picture frames (:class:`tetvr.core.camera.Bounded`): a mesh's points, a
+    volume's box, and with ``outline`` the corners of the box the outline draws."""
+
+    def __init__(self, mesh: Any, outline: bool = True) -> None:
+        self.bounds = np.asarray(mesh.bounds, dtype=np.float64).reshape(2, 3)
+        lo, hi = self.bounds
+        corners = np.array([[(lo, hi)[i >> k & 1][k] for k in range(3)] for i in range(8)])
+        pts = getattr(mesh, "points", None)
+        if pts is None or len(pts) == 0:
+            self.points = corners
+        else:
+            self.points = np.concatenate([np.asarray(pts, dtype=np.float64), corners]) if outline else pts
 
 
 # ---- labelled panels: several pictures side by side, each with its title ----
@@ -410,6 +414,12 @@ def as_mesh(obj: Any, scalars: str | None = None, *, component: int | None = Non
 
     if isinstance(obj, (str, os.PathLike)):
         return read(obj, scalars, component=component)
+    from tetvr.volume.volume import Volume
+
+    if isinstance(obj, Volume):  # rendered as it is, by the same defaults (tetvr.render)
+        if scalars is not None and scalars != obj.scalar_name:
+            raise ValueError(f"the Volume carries one field, {obj.scalar_name!r}, not {scalars!r}")
+        return obj
     if isinstance(obj, TetMesh):
         if scalars is not None and scalars != obj.scalar_name:
             raise ValueError(f"the TetMesh carries the field {obj.scalar_name!r}, not {scalars!r}; "
@@ -445,13 +455,14 @@ def plot(
     ----------
     mesh : a mesh file path, a :class:`~tetvr.TetMesh`, a ``meshio.Mesh``, a ``pyvista``
         or ``vtk`` data set.
-    scalars : the field to render (default: the file's first).
+    scalars : the field to render (default: the file's first that varies, :func:`tetvr.read`).
     cmap : a tetvr preset or any matplotlib colormap name (ignored when ``tf`` is given).
     size : (width, height) of the rendered image; the legend is added to its right.
     background : RGB in [0, 1].
     title, units : the title line and the field's units in the legend.
     camera, tf, settings, method : as :func:`tetvr.render`; by default the camera frames
-        the mesh in this image's shape and ``tf`` is the data-driven default
+        the mesh in this image's shape, its bounding box too where the outline is drawn
+        (:func:`frame`), and ``tf`` is the data-driven default
         (:func:`tetvr.render.default_transfer_function`).
     annotations : ``False`` for the plain picture (no legend, triad or outline).
 
@@ -464,20 +475,18 @@ def plot(
     --------
     >>> tetvr.plot("bluntfin.vtu", "Density", cmap="magma").save("bluntfin.png")  # doctest: +SKIP
     """
-    from tetvr.core.camera import _fit
-    from tetvr.core.image import image_size, png_bytes
+    from tetvr.core.image import png_bytes
     from tetvr.render import default_transfer_function, render
 
     m = as_mesh(mesh, scalars)
     w, h = image_size(size)
     if camera is None:
-        camera = _fit(m, aspect=w / h)
+        camera = frame(m, (w, h), outline=annotations)  # the outline drawn stays in the picture
     if tf is None:
         tf = default_transfer_function(m, preset=cmap)
     image = render(m, camera=camera, tf=tf, size=(w, h), settings=settings, method=method)
     if annotations:
-        png = annotate(image, tf, field=m.scalar_name, units=units, title=title, camera=camera, bounds=m.bounds,
-                       background=background)
+        png = annotate(image, tf, units=units, title=title, camera=camera, background=background, **mesh_labels(m))
     else:
         png = png_bytes(image, background=background)
     return Picture(image=image, png=png, inputs=(os.fspath(mesh),) if isinstance(mesh, (str, os.PathLike)) else ())

@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tetvr.core.camera import Camera
+from tetvr.core.camera import Camera, resolve_clipping_range
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.optics.transfer import TransferFunction
 
@@ -211,6 +211,8 @@ class VTKRenderer:
         self._mods = mods = _import_vtk()
         self.mapper_key = mapper
         self.size = (width, height)
+        pts = np.asarray(mesh.points, dtype=np.float64)
+        self._bounds = np.stack([pts.min(axis=0), pts.max(axis=0)])  # for a camera without a clipping range
         self._window: Any = None
         self._window = window = mods.render.vtkRenderWindow()
         window.SetOffScreenRendering(1)
@@ -251,6 +253,7 @@ class VTKRenderer:
         """Render one frame; (height, width, 4) float32 premultiplied RGBA, row 0 at the top."""
         if self._window is None:
             raise RuntimeError("this VTKRenderer has been released")
+        camera = resolve_clipping_range(camera, self._bounds)
         vtk_camera = self._renderer.GetActiveCamera()
         _set_camera(vtk_camera, camera)
         self._window.Render()

@@ -18,17 +18,19 @@ Where the composite is exact, and what it costs: ``docs/distributed.md``.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import os
 import warnings
-from typing import Any
+from concurrent.futures import CancelledError
+from typing import Any, Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tetvr.cluster.bricks import (Brick, BrickTree, Part, Split, Whole, _check_n_bricks, clip_to_box, composite_over, kd_bricks,
                                   leaf_boxes, leaf_paths, merge_parts, part_mesh, plan_bricks, select_cells, visibility_order)
-from tetvr.cluster.workers import _dask, cluster_client, worker_renderer
-from tetvr.core.camera import Camera
+from tetvr.cluster.workers import cluster_client, gather, wait, wait_for_workers, worker_renderer
+from tetvr.core.camera import Camera, resolve_clipping_range
 from tetvr.core.image import image_size
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.optics.transfer import TransferFunction
@@ -42,8 +44,9 @@ __all__ = ["ClusterBricks", "distribute_mesh", "distribute_pieces", "render_bric
 
 # ---- sort-last bricks ----
 
-def _render_brick(brick: TetMesh, index: int, label: str, camera: Camera, tf: TransferFunction,
+def _render_brick(brick: TetMesh, index: int, labels: dict[int, str], camera: Camera, tf: TransferFunction,
                   size: tuple[int, int], settings: RenderSettings) -> NDArray[np.float32]:
+    label = labels[index]
     try:
         return worker_renderer(settings).render(brick, camera, tf, size=size)
     except Exception as exc:
@@ -51,11 +54,7 @@ def _render_brick(brick: TetMesh, index: int, label: str, camera: Camera, tf: Tr
         raise RuntimeError(f"brick {index} ({label}) could not be rendered: {exc}") from exc
 
 
-def _hold(brick: TetMesh) -> TetMesh:
-    return brick
-
-
-def _brick_facts(brick: TetMesh) -> tuple[int, bool]:
+def _brick_facts(brick: TetMesh, index: int) -> tuple[int, bool]:
     """A brick's cell count and whether it is tangled (folded faces), which "auto" reads."""
     from tetvr.mesh.records import folded_faces
 
@@ -73,21 +72,57 @@ class ClusterBricks:
     whole : what the bricks share with the whole mesh (:class:`tetvr.cluster.bricks.Whole`).
     labels : each brick's name in error messages (the pieces it came from).
     brick_tets : each brick's cell count (cut pieces included).
-    tangled : whether any brick has folded faces (:func:`tetvr.mesh.records.folded_faces`).
+    tangled : whether any brick has folded faces (:func:`tetvr.mesh.records.folded_faces`),
+        checked on the workers when first asked.
     """
 
     def __init__(self, client: Any, futures: dict[int, Any], root: "Split | Brick", whole: Whole,
-                 labels: dict[int, str]) -> None:
+                 labels: dict[int, str], *, brick_tets: dict[int, int] | None = None,
+                 remake: Callable[[int], Any] | None = None) -> None:
         self.client = client
         self.futures = futures
         self.root = root
         self.whole = whole
         self.labels = labels
+        self._brick_tets = brick_tets
+        self._tangled: bool | None = None
+        # A brick whose worker died: remade by remake(index) -> its future (scattered data,
+        # which Dask cannot recompute); None where Dask recomputes it from its tasks.
+        self._remake = remake
+
+    def _on_bricks(self, fn: Callable[..., Any], *args: Any, what: str) -> dict[int, Any]:
+        """``fn(brick, index, *args)`` run on each brick's worker: the results by brick.
+        Bricks whose worker died are remade first, and again (twice at most) where a worker
+        dies under the tasks and takes its bricks with it (the tasks are cancelled)."""
+        c = self.client
+        for attempt in range(3):
+            self._replace_lost(ask=attempt > 0)
+            futures = {i: c.submit(fn, f, i, *args, pure=False) for i, f in self.futures.items()}
+            try:
+                return dict(zip(futures, gather(c, list(futures.values()), what)))
+            except CancelledError:
+                if self._remake is None or attempt == 2:
+                    raise
+        raise AssertionError("unreachable")  # pragma: no cover
+
+    def _facts(self) -> None:
         # Counted and checked on the workers, where the bricks are.
-        facts = dict(zip(futures, client.gather([client.submit(_brick_facts, f, pure=False)
-                                                 for f in futures.values()])))
-        self.brick_tets = {i: n for i, (n, _) in facts.items()}
-        self.tangled = any(t for _, t in facts.values())
+        facts = self._on_bricks(_brick_facts, what="checking the bricks")
+        self._brick_tets = {i: n for i, (n, _) in facts.items()}
+        self._tangled = any(t for _, t in facts.values())
+
+    @property
+    def brick_tets(self) -> dict[int, int]:
+        if self._brick_tets is None:
+            self._facts()
+        assert self._brick_tets is not None
+        return self._brick_tets
+
+    @property
+    def tangled(self) -> bool:
+        if self._tangled is None:
+            self._facts()
+        return bool(self._tangled)
 
     @property
     def n_bricks(self) -> int:
@@ -117,23 +152,43 @@ class ClusterBricks:
                settings: RenderSettings | None = None) -> NDArray[np.float32]:
         """The (height, width, 4) premultiplied float32 image of the whole mesh."""
         size = image_size(size)
+        camera = resolve_clipping_range(camera, self.whole.bounds)  # one range for every brick: the whole mesh's
         settings = self.settings_for(settings or RenderSettings(), camera, size)
-        c = self.client
-        futures = {i: c.submit(_render_brick, f, i, self.labels[i], camera, tf, size, settings, pure=False)
-                   for i, f in self.futures.items()}
-        images = dict(zip(futures, c.gather(list(futures.values()))))
+        images = self._on_bricks(_render_brick, self.labels, camera, tf, size, settings, what="rendering the bricks")
         return composite_over([images[i] for i in visibility_order(self.root, camera)])
+
+    def _replace_lost(self, ask: bool = False) -> None:
+        """Scatter again the bricks whose workers died (scattered data is lost with them):
+        those whose futures say so, and with ``ask`` those no worker holds, as the
+        scheduler says (it may know before this client does)."""
+        if self._remake is None:
+            return
+        lost = {i for i, f in self.futures.items() if f.status in ("lost", "cancelled")}
+        if ask:
+            held = self.client.who_has([f for i, f in self.futures.items() if i not in lost])
+            lost |= {i for i, f in self.futures.items() if i not in lost and not held.get(f.key)}
+        for i in sorted(lost):
+            self.futures[i] = self._remake(i)
 
     def release(self) -> None:
         """Let the workers drop the bricks."""
         for f in self.futures.values():
             f.release()
         self.futures = {}
+        self._remake = None
 
 
 def distribute_mesh(mesh: TetMesh, n_bricks: int, client: Any, *, tree: BrickTree | None = None) -> ClusterBricks:
     """Split ``mesh`` (held here) into ``n_bricks`` k-d bricks (:func:`tetvr.cluster.bricks.kd_bricks`)
-    and hand them to the workers of ``client`` (a ``distributed.Client``)."""
+    and hand them to the workers of ``client`` (a ``distributed.Client``).
+
+    Each brick is scattered to one worker, in turn (``client.scatter``: straight to the
+    worker unless the client was made with ``direct_to_workers=False``, then through the
+    scheduler, which forwards it). No brick travels inside a task, so the scheduler holds
+    only their keys, never the mesh. A worker that dies takes its bricks with it: the
+    next :meth:`ClusterBricks.render` makes them again here from the k-d tree, which the
+    client keeps, and scatters them to the workers left.
+    """
     tree = tree if tree is not None else kd_bricks(mesh, n_bricks)
     if tree.mesh is not mesh:
         raise ValueError("tree was split from another mesh")
@@ -142,14 +197,20 @@ def distribute_mesh(mesh: TetMesh, n_bricks: int, client: Any, *, tree: BrickTre
     if not tree.separable:
         warnings.warn("some k-d split planes run through cells (kd_bricks(cut=False)): the composite is "
                       "approximate within a cell's width of those planes", stacklevel=3)
-    # Each brick travels inside its task (not scattered): a worker that dies loses no
-    # data, the scheduler reruns the task elsewhere. Dask warns of such large tasks; here
-    # they are the point (a mesh too large for that is one for distribute_pieces).
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Sending large graph")
-        futures = {b.index: client.submit(_hold, tree.brick_mesh(b), pure=False) for b in tree.bricks()}
-    labels = {i: f"{len(tree.bricks())} k-d bricks of the mesh" for i in futures}
-    return ClusterBricks(client, futures, tree.root, tree.whole, labels)
+    by_index = {b.index: b for b in tree.bricks()}
+    direct = True if client.direct_to_workers is None else bool(client.direct_to_workers)
+    counts: dict[int, int] = {}
+    turn = itertools.count()  # the workers in turn
+
+    def scatter(i: int) -> Any:
+        workers = wait_for_workers(client, f"handing brick {i} to the workers")
+        brick = tree.brick_mesh(by_index[i])  # made here one at a time, dropped once sent
+        counts[i] = brick.n_tets
+        return client.scatter(brick, workers=[workers[next(turn) % len(workers)]], direct=direct, hash=False)
+
+    futures = {i: scatter(i) for i in sorted(by_index)}
+    labels = {i: f"{n_bricks} k-d bricks of the mesh" for i in futures}
+    return ClusterBricks(client, futures, tree.root, tree.whole, labels, brick_tets=counts, remake=scatter)
 
 
 def render_bricks(
@@ -263,7 +324,8 @@ def distribute_pieces(pieces: Any, n_bricks: int, client: Any, *, scalars: str |
         raise ValueError("no pieces given")
     read = [client.submit(_read_piece, f, scalars, component, pure=False) for f in files]
     per_piece = max(256, _N_SEGMENTS // len(files))
-    summaries = client.gather([client.submit(_piece_summary, r, per_piece, pure=False) for r in read])
+    summaries = gather(client, [client.submit(_piece_summary, r, per_piece, pure=False) for r in read],
+                       "reading the pieces")
     total = sum(s["n_tets"] for s in summaries)
     _check_n_bricks(n_bricks, total)
     kinds = {(s["scalar_name"], s["cell_data"]) for s in summaries}
@@ -271,9 +333,9 @@ def distribute_pieces(pieces: Any, n_bricks: int, client: Any, *, scalars: str |
         raise ValueError("the pieces do not carry one field: " + ", ".join(
             f"{os.path.basename(f)}: {s['scalar_name']!r} ({'cell' if s['cell_data'] else 'point'} data)"
             for f, s in zip(files, summaries)))
-    corners = np.concatenate(client.gather([
+    corners = np.concatenate(gather(client, [
         client.submit(_piece_sample, r, max(1, -(-sample * s["n_tets"] // total)), pure=False)
-        for r, s in zip(read, summaries)]))
+        for r, s in zip(read, summaries)], "sampling the pieces"))
     bounds = np.stack([np.min([s["bounds"][0] for s in summaries], axis=0),
                        np.max([s["bounds"][1] for s in summaries], axis=0)])
     whole = Whole(bounds=bounds, float32_origin=bounds.mean(axis=0),
@@ -296,7 +358,7 @@ def distribute_pieces(pieces: Any, n_bricks: int, client: Any, *, scalars: str |
         futures[i] = client.submit(_assemble_brick, i, labels[i], paths[i], whole, name, *parts, pure=False)
     # Made (and any error raised, naming its piece) before the pieces go; waited for, not
     # gathered: the bricks stay on the workers.
-    _dask().wait(list(futures.values()))
+    wait(client, list(futures.values()), "making the bricks")
     for f in futures.values():
         if f.status == "error":
             f.result()

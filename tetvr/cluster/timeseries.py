@@ -20,7 +20,7 @@ from typing import Any, Union
 import numpy as np
 from numpy.typing import NDArray
 
-from tetvr.cluster.workers import _dask, cluster_client, worker_renderer
+from tetvr.cluster.workers import as_completed, cluster_client, gather, worker_renderer
 from tetvr.core.camera import Camera
 from tetvr.core.image import image_size
 from tetvr.core.outputs import check_outputs, check_writable
@@ -238,10 +238,10 @@ def render_series(
     settings = settings or RenderSettings()
     size = image_size(size)
     names = _frame_names(output, items)
-    distributed = _dask()
     with cluster_client(client) as c:
         if camera is None or tf is None:
-            got = c.gather([c.submit(_summary, s.source, scalars, component, pure=False) for s in items])
+            got = gather(c, [c.submit(_summary, s.source, scalars, component, pure=False) for s in items],
+                         "reading the steps' bounds and ranges")
             lo = np.min([b[0] for b, _ in got], axis=0)
             hi = np.max([b[1] for b, _ in got], axis=0)
             if camera is None:
@@ -256,7 +256,7 @@ def render_series(
         index = {f.key: i for i, f in enumerate(futures)}
         results: list[Any] = [None] * len(futures)
         with tqdm(total=len(futures), disable=not progress, unit="frame", desc="tetvr") as bar:
-            for fut in distributed.as_completed(futures):
+            for fut in as_completed(c, futures, "rendering the steps"):
                 results[index[fut.key]] = fut.result()  # a failed step raises here, naming its error
                 bar.update(1)
     return results

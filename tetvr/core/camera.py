@@ -2,7 +2,9 @@
 
 ``position``, ``focal_point``, ``view_up``; a perspective ``view_angle`` (vertical, in
 degrees) or a parallel projection with ``parallel_scale`` (half the image height in world
-units); ``clipping_range`` is ``(near, far)`` measured along the view direction.
+units); ``clipping_range`` is ``(near, far)`` measured along the view direction, or ``None``
+(the default): computed from the data when it is rendered, as VTK's
+``vtkRenderer::ResetCameraClippingRange`` does (:func:`resolve_clipping_range`).
 Pixel ``(i, j)`` (row ``i`` from the top) samples the ray through its centre.
 """
 
@@ -15,7 +17,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Bounded", "Camera"]
+__all__ = ["Bounded", "Camera", "resolve_clipping_range", "union_bounds"]
 
 Vec3 = tuple[float, float, float]
 
@@ -93,6 +95,14 @@ class Camera:
     >>> cam = Camera(position=(0, 0, 5), focal_point=(0, 0, 0), view_up=(0, 1, 0))
     >>> cam.direction
     (0.0, 0.0, -1.0)
+
+    Without a ``clipping_range`` the range comes from the data it renders (the mesh's or
+    the volume's bounds), resolved by :func:`resolve_clipping_range`:
+
+    >>> cam.clipping_range is None
+    True
+    >>> resolve_clipping_range(cam, [(-1, -1, -1), (1, 1, 1)]).clipping_range
+    (2.96, 7.58)
     """
 
     position: Vec3 = (0.0, 0.0, 1.0)
@@ -101,7 +111,7 @@ class Camera:
     view_angle: float = 30.0
     parallel_projection: bool = False
     parallel_scale: float = 1.0
-    clipping_range: tuple[float, float] = (0.01, 1000.0)
+    clipping_range: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         pos = _vec3(self.position, "position")
@@ -133,6 +143,8 @@ class Camera:
         if not scale > 0:
             raise ValueError(f"parallel_scale must be positive, got {self.parallel_scale!r}")
         object.__setattr__(self, "parallel_scale", scale)
+        if self.clipping_range is None:
+            return  # from the data, when it is rendered (resolve_clipping_range)
         try:
             near, far = (_real(v, "clipping_range") for v in self.clipping_range)
         except (TypeError, ValueError):
@@ -213,9 +225,17 @@ class Camera:
         m[:3, 3] = -m[:3, :3] @ np.asarray(self.position)
         return m
 
+    def near_far(self) -> tuple[float, float]:
+        """``clipping_range``; a ``ValueError`` when it is still ``None`` (from the data):
+        what needs the planes resolves it first, :func:`resolve_clipping_range`."""
+        if self.clipping_range is None:
+            raise ValueError("this camera's clipping_range is None (computed from the data when it is rendered): "
+                             "resolve it first with tetvr.core.camera.resolve_clipping_range(camera, bounds)")
+        return self.clipping_range
+
     def projection_matrix(self, aspect: float) -> NDArray[np.float64]:
         """Eye -> clip, OpenGL convention, for an image of width/height ``aspect``."""
-        n, f = self.clipping_range
+        n, f = self.near_far()
         m = np.zeros((4, 4))
         if self.parallel_projection:
             h = self.parallel_scale
@@ -413,10 +433,41 @@ def reset_clipping_range(camera: Camera, bounds: Any) -> Camera:
     return dataclasses.replace(camera, clipping_range=(near, far))
 
 
+def resolve_clipping_range(camera: Camera, bounds: Any) -> Camera:
+    """``camera`` itself when it has a clipping range; else the camera with the range from
+    the data in ``bounds`` (a ``(2, 3)`` box ``(lo, hi)`` around everything the frame draws,
+    or ``(n, 3)`` points), as :func:`reset_clipping_range` computes it. Every renderer calls this on the
+    camera it is given, so ``clipping_range=None`` means "from the data".
+
+    >>> cam = Camera(position=(0, 0, 3000))
+    >>> resolve_clipping_range(cam, [(-1, -1, -1), (1, 1, 1)]).clipping_range[1] > 3001
+    True
+    >>> resolve_clipping_range(Camera(clipping_range=(1, 2)), [(-1, -1, -1), (1, 1, 1)]).clipping_range
+    (1.0, 2.0)
+    """
+    if camera.clipping_range is not None:
+        return camera
+    return reset_clipping_range(camera, union_bounds(bounds))
+
+
+def union_bounds(*parts: Any) -> NDArray[np.float64]:
+    """The ``(2, 3)`` box ``(lo, hi)`` around every part given: ``(2, 3)`` boxes or
+    ``(n, 3)`` points (a box's two corners are two of its points).
+
+    >>> union_bounds([(0, 0, 0), (1, 1, 1)], [(-1, 0, 0), (0, 2, 0)]).tolist()
+    [[-1.0, 0.0, 0.0], [1.0, 2.0, 1.0]]
+    """
+    p = np.concatenate([np.asarray(x, dtype=np.float64).reshape(-1, 3) for x in parts])
+    return np.array([p.min(axis=0), p.max(axis=0)])
+
+
 def check_clipping_range(camera: Camera, points: Any) -> bool:
     """Warn (``UserWarning``) when the camera's clipping range leaves none of ``points``
     between its near and far planes, so the picture would be blank; returns whether it
-    does. :func:`reset_clipping_range` gives a range from the data."""
+    does. A camera whose range is ``None`` (from the data) always sees the data.
+    :func:`reset_clipping_range` gives a range from the data."""
+    if camera.clipping_range is None:
+        return False
     near, far = camera.clipping_range
     dmin, dmax = depth_extent(camera, points)
     if dmax >= near and dmin <= far:
@@ -426,6 +477,6 @@ def check_clipping_range(camera: Camera, points: Any) -> bool:
     where = "in front of the near plane" if dmax < near else "beyond the far plane"
     warn(f"the camera's clipping_range ({near:.6g}, {far:.6g}) clips all the data away: the data's depth "
          f"extent along the view is {dmin:.6g} .. {dmax:.6g}, all of it {where}, so the picture is blank; "
-         "leave clipping_range out of a scene to compute it from the data, or use "
+         "leave clipping_range out (None) to compute it from the data, or use "
          "tetvr.core.camera.reset_clipping_range(camera, mesh.bounds)")
     return True

@@ -51,7 +51,7 @@ class EyeRays:
         # Same operation order as Camera.rays, so the rays agree to the last bit or so.
         x_col = x_ndc * k * aspect
         y_row = y_ndc * k
-        near, far = camera.clipping_range
+        near, far = camera.near_far()
         return cls(camera.parallel_projection, width, height, x_col, y_row, k * aspect, k, near, far)
 
     def norms(self) -> Float:

@@ -32,7 +32,7 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tetvr.core.camera import Camera
+from tetvr.core.camera import Camera, resolve_clipping_range, union_bounds
 from tetvr.core.rays import EyeRays
 
 __all__ = ["Surface", "surface_hits", "check_surfaces"]
@@ -230,8 +230,9 @@ def surface_hits(surfaces: Sequence[Surface], camera: Camera, size: tuple[int, i
     ray through its centre, as :func:`tetvr.reference.tets.render_reference`.
     """
     width, height = int(size[0]), int(size[1])
+    camera = resolve_clipping_range(camera, union_bounds(*(s.points for s in surfaces)) if surfaces else [[0.0] * 3] * 2)
     rays = EyeRays.from_camera(camera, width, height)
-    near, far = camera.clipping_range
+    near, far = camera.near_far()
     best = np.full((height, width), np.inf)
     rgb = np.zeros((height, width, 3))
     # Every pixel's eye-space ray and unit direction to the eye, once for all triangles.

@@ -19,7 +19,7 @@ import weakref
 from typing import Any, Iterator
 
 __all__ = ["GLUnavailableError", "ForkedProcessError", "create_context", "current_in_thread", "context_lock",
-           "context_alive", "check_not_forked", "REQUIRED_GL", "BACKENDS"]
+           "context_alive", "context_device", "egl_cuda_devices", "check_not_forked", "REQUIRED_GL", "BACKENDS"]
 
 #: Compute shaders and shader storage buffers need OpenGL 4.3.
 REQUIRED_GL = 430
@@ -99,6 +99,8 @@ def _load_egl() -> Any:
         lib.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
         lib.eglMakeCurrent.restype = ctypes.c_uint
         lib.eglGetError.restype = ctypes.c_int32
+        lib.eglGetProcAddress.restype = ctypes.c_void_p
+        lib.eglGetProcAddress.argtypes = [ctypes.c_char_p]
         return lib
     return None
 
@@ -136,6 +138,7 @@ class _ContextState:
     foreign: bool = False  # not EGL (or EGL not loadable): moderngl's own enter/exit
     depth: int = 0
     prior: _Binding | None = None
+    device: int | None = None  # the EGL device it was made on, when one was asked for
 
 
 _states: "weakref.WeakKeyDictionary[Any, _ContextState]" = weakref.WeakKeyDictionary()
@@ -230,14 +233,21 @@ def _restore(ctx: Any, state: _ContextState, prior: _Binding | None) -> None:
 
 
 # ---- creation ----
-def create_context() -> Any:
+def create_context(device: int | None = None) -> Any:
     """A standalone moderngl context (OpenGL >= 4.3 core), current in no thread: use it
     inside :func:`current_in_thread` (or moderngl's ``with ctx:``).
 
     EGL first (headless: no display needed); where EGL is absent or fails, the
     platform's default context (:data:`BACKENDS`). If neither can be made, the error
-    names what each attempt said and how to install a driver."""
+    names what each attempt said and how to install a driver.
+
+    ``device``: the EGL device to make it on (an index into EGL's device list, as
+    ``eglQueryDevicesEXT`` gives it; :func:`egl_cuda_devices` says which GPU each is).
+    None: the driver's first. With a device, only EGL is tried: a context elsewhere would
+    be on another GPU than the one asked for."""
     check_not_forked()
+    if device is not None and (isinstance(device, bool) or not isinstance(device, int) or device < 0):
+        raise ValueError(f"device must be a non-negative integer (an EGL device index) or None, got {device!r}")
     try:
         import moderngl
     except ImportError as exc:  # pragma: no cover - moderngl is a hard dependency
@@ -245,20 +255,24 @@ def create_context() -> Any:
     prior = _egl_current()
     failures: list[str] = []
     ctx = None
-    for backend in BACKENDS:
+    for backend in (("egl",) if device is not None else BACKENDS):
         try:
-            kwargs = {"backend": backend} if backend else {}
-            ctx = moderngl.create_standalone_context(require=REQUIRED_GL, **kwargs)  # type: ignore[arg-type]
+            kwargs: dict[str, Any] = {"backend": backend} if backend else {}
+            if device is not None:
+                kwargs["device_index"] = device
+            ctx = moderngl.create_standalone_context(require=REQUIRED_GL, **kwargs)
             break
         except Exception as exc:
             failures.append(f"{'EGL' if backend == 'egl' else backend or 'the platform default'}: "
                             f"{type(exc).__name__}: {exc}")
     if ctx is None:
+        on = f" on EGL device {device}" if device is not None else ""
         raise GLUnavailableError(
-            f"could not create an OpenGL {REQUIRED_GL // 100}.{REQUIRED_GL % 100 // 10} context "
+            f"could not create an OpenGL {REQUIRED_GL // 100}.{REQUIRED_GL % 100 // 10} context{on} "
             f"({'; '.join(failures)}). {_INSTALL_HINT}"
         )
     state = _state(ctx)
+    state.device = device
     with state.lock:
         # moderngl left the new context current in this thread: note its EGL binding, read
         # (and cache) the info strings that owners read outside the lock, then release it.
@@ -278,6 +292,53 @@ def create_context() -> Any:
             f"(compute shaders). {_INSTALL_HINT}"
         )
     return ctx
+
+
+def context_device(ctx: Any) -> int | None:
+    """The EGL device ``ctx`` was made on by :func:`create_context`, None where none was
+    asked for (the driver's first) or the context was made elsewhere."""
+    return _state(ctx).device
+
+
+# EGL_NV_device_cuda: the CUDA device an EGL device is (NVIDIA's driver says; Mesa's does not).
+_EGL_CUDA_DEVICE_NV = 0x323A
+
+
+def egl_cuda_devices() -> list[int | None]:
+    """For each EGL device (``eglQueryDevicesEXT``'s order, the index :func:`create_context`
+    takes), the CUDA device it is, as this process numbers CUDA devices (after
+    ``CUDA_VISIBLE_DEVICES``); None for a device that is no CUDA device (Mesa's, or a GPU
+    this process does not see). Empty where EGL cannot list its devices.
+
+    Examples
+    --------
+    >>> all(d is None or d >= 0 for d in egl_cuda_devices())
+    True
+    """
+    egl = _egl()
+    if egl is None:
+        return []
+    query_devices = egl.eglGetProcAddress(b"eglQueryDevicesEXT")
+    query_attrib = egl.eglGetProcAddress(b"eglQueryDeviceAttribEXT")
+    if not query_devices or not query_attrib:
+        return []
+    devices_fn = ctypes.CFUNCTYPE(ctypes.c_uint, ctypes.c_int32, ctypes.POINTER(ctypes.c_void_p),
+                                  ctypes.POINTER(ctypes.c_int32))(query_devices)
+    attrib_fn = ctypes.CFUNCTYPE(ctypes.c_uint, ctypes.c_void_p, ctypes.c_int32,
+                                 ctypes.POINTER(ctypes.c_ssize_t))(query_attrib)
+    count = ctypes.c_int32(0)
+    if not devices_fn(0, None, ctypes.byref(count)) or count.value <= 0:
+        return []
+    devices = (ctypes.c_void_p * count.value)()
+    if not devices_fn(count.value, devices, ctypes.byref(count)):
+        return []
+    out: list[int | None] = []
+    for k in range(count.value):
+        value = ctypes.c_ssize_t(-1)
+        ok = attrib_fn(devices[k], _EGL_CUDA_DEVICE_NV, ctypes.byref(value))
+        out.append(int(value.value) if ok and value.value >= 0 else None)
+    egl.eglGetError()  # a device that is no CUDA device left EGL_BAD_ATTRIBUTE: not ours to keep
+    return out
 
 
 def describe(ctx: Any) -> dict[str, str]:

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from tetvr.mesh.records import RECORD_TEXELS
 
 __all__ = ["PLANES_IMAGE", "IDS_IMAGE", "LINKS_IMAGE", "POINTS_IMAGE", "COUNT_IMAGE", "LIST_IMAGE", "COPIES_IMAGE", "NEIGHBORS_IMAGE",
-           "OVERFLOW_BUFFER", "MORE_BUFFER", "LIST_LENGTH", "LIST_MAX_BYTES", "NEAREST", "Layout", "Rim",
+           "OVERFLOW_BUFFER", "MORE_BUFFER", "SUSPECT_BUFFER", "SUSPECT_LENGTH", "LIST_LENGTH", "LIST_MAX_BYTES", "NEAREST", "Layout", "Rim",
            "raymarch_capacity", "rect_triangles"]
 
 #: GL_NEAREST: records and targets are read with texelFetch, never filtered (the value of
@@ -30,6 +30,10 @@ PLANES_IMAGE, IDS_IMAGE, LINKS_IMAGE, POINTS_IMAGE = 0, 1, 2, 3
 #: of faces, and the faces; storage-buffer bindings of the pixels that overflowed it and of
 #: those that go on to another layer (march.frag, LIST).
 COUNT_IMAGE, LIST_IMAGE, OVERFLOW_BUFFER, MORE_BUFFER = 4, 5, 0, 1
+#: Storage-buffer binding of the frame's check of itself (march.frag: the count of pixels
+#: whose walk went wrong, and the first SUSPECT_LENGTH of them, for tetvr.gl.selfcheck).
+SUSPECT_BUFFER = 2
+SUSPECT_LENGTH = 4096
 #: Faces listed per pixel: a pixel whose ray meets more front faces than this (in its
 #: clipping range) overflows the list, and that frame peels instead. With the list, the
 #: march passes pick each further entry themselves: no peel pass rasterises the boundary
@@ -75,7 +79,8 @@ class Layout:
                     ITEMS_ROW_SHIFT=self.items.bit_length() - 1, PLANES_IMAGE=PLANES_IMAGE, IDS_IMAGE=IDS_IMAGE,
                     LINKS_IMAGE=LINKS_IMAGE, POINTS_IMAGE=POINTS_IMAGE, COUNT_IMAGE=COUNT_IMAGE,
                     LIST_IMAGE=LIST_IMAGE, OVERFLOW_BUFFER=OVERFLOW_BUFFER, MORE_BUFFER=MORE_BUFFER,
-                    COPIES_IMAGE=COPIES_IMAGE, NEIGHBORS_IMAGE=NEIGHBORS_IMAGE)
+                    COPIES_IMAGE=COPIES_IMAGE, NEIGHBORS_IMAGE=NEIGHBORS_IMAGE, SUSPECT_BUFFER=SUSPECT_BUFFER,
+                    SUSPECT_LENGTH=SUSPECT_LENGTH)
 
 
 def rect_triangles(rects: NDArray[np.float64]) -> NDArray[np.float32]:

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tetvr.core.checks import check_instances
-from tetvr.core.camera import Camera
+from tetvr.core.camera import Camera, resolve_clipping_range
 from tetvr.core.image import _gib, check_memory
 from tetvr.optics.preintegrate import table_for
 from tetvr.optics.table import PreintegrationTable, check_unit_distance, table_build_bytes, table_scalar_range
@@ -371,8 +371,9 @@ class Raycaster(GLOwner):
     def _render(self, volume: Volume, camera: Camera, tf: TransferFunction, size: tuple[int, int],
                 t_start: ArrayLike | None, t_end: ArrayLike | None, settings: RaycastSettings | None) -> NDArray[np.float32]:
         check_instances(volume=(volume, Volume), camera=(camera, Camera), tf=(tf, TransferFunction))
+        camera = resolve_clipping_range(camera, volume.bounds)  # None: from the data, as VTK
         s = settings or self.settings
-        width, height = check_size(size, self.ctx)
+        width, height = check_size(size, self.ctx, method="raycast")
         clear_gl_errors(self.ctx)  # what a failed earlier frame left is not this frame's error
         clock = Clock(self.ctx, self.profile)
 
@@ -447,7 +448,7 @@ class Raycaster(GLOwner):
         uniforms = dict(
             u_inv_viewport=(1.0 / width, 1.0 / height), u_perspective=0 if camera.parallel_projection else 1,
             u_k=(k * aspect, k), u_eye_to_index=eye_to_index, u_eye_to_local=eye_to_local,
-            u_box_hi=tuple(float(n - 1) for n in gpu.dims), u_clip_range=camera.clipping_range,
+            u_box_hi=tuple(float(n - 1) for n in gpu.dims), u_clip_range=camera.near_far(),
             u_use_clip_box=int(s.clip_box is not None), u_clip_lo=tuple(clip_lo), u_clip_hi=tuple(clip_hi),
             u_use_limits=int(use_limits), u_step=step, u_max_steps=max_steps,
             u_termination_tolerance=s.termination_tolerance, u_jitter=int(s.jitter), u_seed=s.seed,

@@ -42,10 +42,11 @@ from numpy.typing import NDArray
 
 from tetvr.core.camera import Camera
 from tetvr.gl.march_layout import (NEIGHBORS_IMAGE, COPIES_IMAGE, COUNT_IMAGE, IDS_IMAGE, LINKS_IMAGE, LIST_IMAGE, LIST_LENGTH,
-                                   LIST_MAX_BYTES, MORE_BUFFER, NEAREST, OVERFLOW_BUFFER, PLANES_IMAGE, POINTS_IMAGE, Layout, Rim,
+                                   LIST_MAX_BYTES, MORE_BUFFER, SUSPECT_BUFFER, SUSPECT_LENGTH, NEAREST, OVERFLOW_BUFFER, PLANES_IMAGE, POINTS_IMAGE, Layout, Rim,
                                    raymarch_capacity, rect_triangles)
 from tetvr.mesh.records import RECORD_TEXELS, MarchRecords, march_records, near_plane_cells, rim_faces
 from tetvr.mesh.copies import DistinctCells, distinct_cells
+from tetvr.mesh.locality import spatially_ordered
 from tetvr.order.walkable import walk_check
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.gl.host import ProgramHost
@@ -87,12 +88,20 @@ def _prefetch(mesh: TetMesh) -> Future[tuple[DistinctCells, MarchRecords]]:
     return future
 
 
+def _slack(mesh: TetMesh, camera: Camera) -> float:
+    """Length an exit may lie behind its entry by float32 rounding alone (march.frag's
+    check): 1e-4 of the mesh's diagonal, and 1e-5 of the eye's distance from its centre."""
+    lo, hi = mesh.bounds
+    far = float(np.linalg.norm(np.asarray(camera.position, dtype=np.float64) - (lo + hi) / 2))
+    return 1e-4 * float(np.linalg.norm(hi - lo)) + 1e-5 * far
+
+
 def _records(mesh: TetMesh) -> tuple[DistinctCells, MarchRecords]:
-    """The mesh the walk goes through (each repeated cell once, :mod:`tetvr.mesh.copies`) and
-    its records; and what :func:`~tetvr.order.method.choose` checks of the mesh
+    """The mesh the walk goes through (its points along a space-filling curve,
+    :mod:`tetvr.mesh.locality`; each repeated cell once, :mod:`tetvr.mesh.copies`) and its records; and what :func:`~tetvr.order.method.choose` checks of the mesh
     (:func:`~tetvr.order.walkable.walk_check`), all cached with the mesh."""
     walk_check(mesh)
-    distinct = distinct_cells(mesh)
+    distinct = distinct_cells(spatially_ordered(mesh))
     return distinct, march_records(distinct.mesh)
 
 
@@ -110,6 +119,12 @@ class MarchStats:
     entry_list: bool = False
     n_near_cells: int = 0
     n_rim_faces: int = 0
+    #: Rays whose walk went wrong (march.frag's check: a step bound reached, no face ahead,
+    #: an exit behind its entry), each counted once in each pass; 0 on a clean mesh.
+    n_suspect: int = 0
+    #: Their pixels (row * width + column, unique; at most SUSPECT_LENGTH listed).
+    suspect_pixels: NDArray[np.int64] = dataclasses.field(default_factory=lambda: np.zeros(0, np.int64),
+                                                          compare=False, repr=False)
 
 
 class Marcher:
@@ -128,6 +143,8 @@ class Marcher:
         self._targets: dict[tuple[int, int], dict[str, Any]] = {}
         self._query: Any = None
         self._counters: list[Any] = []  # the overflow and more counters (LIST)
+        self._suspects: Any = None  # the frame's check of itself (march.frag, SUSPECT_BUFFER)
+        self.frames = 0  # frames drawn: a caller tells whether last_stats is its frame's
         self._prefetch: tuple[TetMesh, Future[tuple[DistinctCells, MarchRecords]]] | None = None
         self._shifts: dict[str, int] = {}
         self._points: NDArray[np.float32] = np.zeros((0, 4), dtype=np.float32)
@@ -136,7 +153,8 @@ class Marcher:
 
     # ---- ownership ----
     def gl_objects(self) -> list[Any]:
-        objs = [*self._vaos.values(), *self._textures.values(), *self._faces, *self._counters]
+        objs = [*self._vaos.values(), *self._textures.values(), *self._faces, *self._counters,
+                *([self._suspects] if self._suspects is not None else [])]
         for t in self._targets.values():
             objs += list(t.values())
         return objs  # the occlusion query has no release in moderngl: it goes with the context
@@ -144,6 +162,7 @@ class Marcher:
     def forget(self) -> None:
         self._vaos.clear()
         self._textures, self._faces, self._counters = {}, [], []
+        self._suspects = None
         self._targets.clear()
         self._query = None
         self._mesh = self._walked = self._records = None
@@ -240,9 +259,9 @@ class Marcher:
 
         return cached_targets(self.ctx, self._targets, size, self._make_target)
 
-    def _make_target(self, size: tuple[int, int]) -> dict[str, Any]:
+    def _make_target(self, size: tuple[int, int], t: dict[str, Any]) -> None:
         ctx = self.ctx
-        t = {"entry": ctx.texture(size, 1, dtype="i4"), "depth": ctx.depth_texture(size)}
+        t.update(entry=ctx.texture(size, 1, dtype="i4"), depth=ctx.depth_texture(size))
         t["depth"].compare_func = ""
         t["entry_fbo"] = ctx.framebuffer(color_attachments=[t["entry"]], depth_attachment=t["depth"])
         for side in "ab":
@@ -255,7 +274,6 @@ class Marcher:
         for name, tex in t.items():
             if "fbo" not in name:
                 tex.filter = (NEAREST, NEAREST)
-        return t
 
     # ---- the frame ----
     def render(self, mesh: TetMesh, camera: Camera, size: tuple[int, int], uniforms: dict[str, Any],
@@ -289,6 +307,10 @@ class Marcher:
                       u_near=uniforms["u_near"], u_far=uniforms["u_far"],
                       u_tolerance=1e-6 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])))
         t = self._target(size)
+        if self._suspects is None:
+            self._suspects = ctx.buffer(reserve=4 * (1 + SUSPECT_LENGTH))
+        self._suspects.write(b"\0" * 4)
+        self._suspects.bind_to_storage_buffer(SUSPECT_BUFFER)
         self._write_points(mesh, rec, common["u_inv_view"])
         for unit, tex in self._textures.items():
             tex.bind_to_image(unit, read=True, write=False)
@@ -301,7 +323,8 @@ class Marcher:
                              MULTIPLICITY=int(COPIES_IMAGE in self._textures), JUMPS=int(self._jumps),
                              **(window.defines if window is not None else {}))
         samplers = dict(u_entry=4, u_color_in=5, u_state_in=6, u_last_in=7, u_state=5, u_last=7)
-        steps = dict(u_max_steps=int(min(mesh.n_tets + 1, 1 << 30)), u_opaque=1.0 - OPAQUE_REMAINDER)
+        steps = dict(u_max_steps=int(min(mesh.n_tets + 1, 1 << 30)), u_opaque=1.0 - OPAQUE_REMAINDER,
+                     u_slack=_slack(mesh, camera))
         march_uniforms = {**common, **table_uniforms, **samplers, **steps}
         src, dst = "b", "a"
         layers, exhausted = 0, False
@@ -325,11 +348,23 @@ class Marcher:
             exhausted = True
         if rim is not None:
             rim.release()
+        n_suspect, suspects = self._read_suspects()
+        self.frames += 1
         self.last_stats = MarchStats(layers=layers, layers_exhausted=exhausted, entry_list=listed,
-                                     n_near_cells=n_near_cells, n_rim_faces=rim.n_faces if rim is not None else 0)
+                                     n_near_cells=n_near_cells, n_rim_faces=rim.n_faces if rim is not None else 0,
+                                     n_suspect=n_suspect, suspect_pixels=suspects)
         raw = t[f"color_{src}"].read()
         clock.lap("readback")
         return np.frombuffer(raw, dtype=np.float32).reshape(size[1], size[0], 4)[::-1].copy()
+
+    def _read_suspects(self) -> tuple[int, NDArray[np.int64]]:
+        """The frame's count of rays whose walk went wrong, and their pixels (unique)."""
+        self.ctx.memory_barrier()
+        n = int(np.frombuffer(self._suspects.read(4), dtype=np.uint32)[0])
+        if n == 0:
+            return 0, np.zeros(0, np.int64)
+        listed = np.frombuffer(self._suspects.read(4 * min(n, SUSPECT_LENGTH), offset=4), dtype=np.uint32)
+        return n, np.unique(listed.astype(np.int64))
 
     def _first_entries(self, t: dict[str, Any], mesh: TetMesh, rec: MarchRecords, camera: Camera,
                        size: tuple[int, int], common: dict[str, Any], perspective: int, extent: bool

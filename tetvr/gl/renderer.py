@@ -18,7 +18,7 @@ from typing import Any, Callable, Iterator
 import numpy as np
 from numpy.typing import NDArray
 
-from tetvr.core.camera import Camera
+from tetvr.core.camera import Camera, resolve_clipping_range, union_bounds
 from tetvr.core.clip import Clip, check_clip
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.optics.preintegrate import table_for
@@ -31,9 +31,11 @@ from tetvr.order.sort import sort_with_stats
 from tetvr.optics.transfer import TransferFunction
 from tetvr.gl.context import create_context, describe
 from tetvr.gl.shaders import ShaderCompileError, assemble, explain
-from tetvr.order.method import AUTO_MAX_TETS, choose
+from tetvr.order.method import choose, march_fits
 from tetvr.gl.projected import ProjectedCells
+from tetvr.gl.framesize import frame_method
 from tetvr.gl.raymarch import Marcher, raymarch_capacity
+from tetvr.gl.selfcheck import retrace
 from tetvr.gl.vtkpt import VTKParity, vtk_depth_order
 from tetvr.gl.surfaces import RayWindow, SurfacePass
 from tetvr.core.surface import Surface, check_surfaces
@@ -68,8 +70,7 @@ class FrameStats:
 
     @property
     def total(self) -> float:
-        return (self.upload + self.classify + self.sort + self.order_upload + self.table + self.setup + self.draw
-                + self.entry + self.march + self.readback)
+        return sum(getattr(self, f.name) for f in dataclasses.fields(self) if f.type in (float, "float"))
 
 
 class Renderer(GLOwner):
@@ -81,12 +82,13 @@ class Renderer(GLOwner):
     profile : wait for the GPU after each stage so :attr:`last_stats` holds stage times.
     chunk_tets : the most tets drawn at once (default 600,000, capped by the GL's storage
         buffer size); larger meshes are classified and drawn in sorted chunks.
+    device : the EGL device (GPU) its context is made on (:func:`tetvr.gl.context.create_context`);
+        None: the driver's first.
 
     One renderer holds one GL context. It may be shared by threads: each call takes the
-    context's lock and makes the context current for its duration, so a second thread
-    waits for the first and both get the frames they would get alone (moderngl holds
-    Python's interpreter lock while the GL draws, so threads do not render in parallel;
-    the Jupyter viewer renders in a child process for that reason).
+    context's lock and makes the context current for its duration, so a second thread waits
+    for the first and both get the frames they would get alone (moderngl holds Python's
+    interpreter lock while the GL draws; the Jupyter viewer renders in a child process).
 
     Examples
     --------
@@ -95,7 +97,7 @@ class Renderer(GLOwner):
     """
 
     def __init__(self, settings: RenderSettings | None = None, *, profile: bool = False,
-                 chunk_tets: int | None = None) -> None:
+                 chunk_tets: int | None = None, device: int | None = None) -> None:
         # Arguments are checked before the context is made: a refused one leaks nothing.
         if settings is None:
             settings = RenderSettings()
@@ -107,7 +109,7 @@ class Renderer(GLOwner):
             raise ValueError(f"chunk_tets must be a positive integer, got {chunk_tets!r}")
         self.settings = settings
         self.profile = bool(profile)
-        self.ctx: Any = create_context()
+        self.ctx: Any = create_context(device)
         self.gl_info = describe(self.ctx)
         self._programs: dict[tuple[str, ...], Any] = {}
         self._cells = ProjectedCells(self, chunk_tets)  # projected tetrahedra's buffers (no GL object yet)
@@ -161,12 +163,7 @@ class Renderer(GLOwner):
             total += self._table.data.nbytes
         for (size, components, dtype) in self._targets:
             total += size[0] * size[1] * components * (4 if dtype == "f4" else 1)
-        if self._marcher is not None:
-            total += self._marcher.gpu_bytes()
-        if self._parity is not None:
-            total += self._parity.gpu_bytes()
-        if self._surfaces is not None:
-            total += self._surfaces.gpu_bytes()
+        total += sum(part.gpu_bytes() for part in (self._marcher, self._parity, self._surfaces) if part is not None)
         return int(total)
 
     # ---- programs ----
@@ -273,7 +270,7 @@ class Renderer(GLOwner):
         self._clock.lap("upload")
         view = camera.view_matrix()
         view[:3, 3] += view[:3, :3] @ self._cells.centre  # the buffers hold points minus the centre
-        near, far = camera.clipping_range
+        near, far = camera.near_far()
         proj = camera.projection_matrix(size[0] / size[1])
         return dict(u_view=view, u_proj=proj, u_perspective=0 if camera.parallel_projection else 1,
                     u_half_px=(size[0] / 2.0, size[1] / 2.0),
@@ -302,14 +299,14 @@ class Renderer(GLOwner):
             raise RuntimeError(f"OpenGL error after rendering: {err}")
         return image
 
-    def _check(self, size: tuple[int, int]) -> tuple[int, int]:
-        """Start a frame: the size checked against the GL's limits and memory before any GL
-        call, and the error flags a failed earlier frame may have left (a texture it could
-        not make: ``GL_OUT_OF_MEMORY``) cleared, so this frame's own check after the
-        readback reports only this frame's errors."""
+    def _check(self, size: tuple[int, int], method: str = "projected", surfaces: bool = False) -> tuple[int, int]:
+        """Start a frame: the size checked against the GL's limits and a ``method`` frame's memory
+        (:mod:`tetvr.gl.framesize`) before any GL call, and the error flags a failed earlier
+        frame may have left (``GL_OUT_OF_MEMORY``) cleared, so this frame's own check after
+        the readback reports only this frame's errors."""
         self._check_alive()
         self._clock = Clock(self.ctx, self.profile)
-        size = check_size(size, self.ctx)
+        size = check_size(size, self.ctx, method=method, surfaces=surfaces)
         clear_gl_errors(self.ctx)
         return size
 
@@ -342,18 +339,23 @@ class Renderer(GLOwner):
         if windowed and self.settings.optics == "vtk":
             raise ValueError("clip and surfaces are not part of VTK parity (optics='vtk'), which reproduces VTK's "
                              "projected tetrahedra as they are; use optics 'exact' or 'linear'")
-        size = self._check(size)
+        size = self._check(size, frame_method(self.settings, mesh.n_tets, order=order, shader=shader), bool(surfaces))
+        camera = resolve_clipping_range(camera, union_bounds(mesh.bounds, *(s.points for s in surfaces)))  # None: VTK's
         window = RayWindow.make(clip, camera)
         if surfaces:
             if self._surfaces is None:
                 self._surfaces = SurfacePass(self)
             _, limit = self._surfaces.draw(surfaces, camera, size, mesh.float32_origin)
             window = dataclasses.replace(window, limit=limit)
+        frames = self._marcher.frames if self._marcher is not None else 0
         image = self._render(mesh, camera, tf, size, order, shader, window)
         if surfaces:
             assert self._surfaces is not None
-            behind = self._surfaces.read_color(size)
-            image += (1.0 - image[..., 3:4]) * behind  # the tets over the surfaces
+            image += (1.0 - image[..., 3:4]) * self._surfaces.read_color(size)  # the tets over the surfaces
+        if self._marcher is not None and self._marcher.frames != frames:  # tet marching drew it: its check
+            st = self._marcher.last_stats  # (tetvr.gl.selfcheck)
+            retrace(image, st.n_suspect, st.suspect_pixels, mesh, camera, tf, optics=self.settings.optics, clip=clip,
+                    surfaces=surfaces)
         return image
 
     def _render(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, size: tuple[int, int],
@@ -368,9 +370,9 @@ class Renderer(GLOwner):
         if shader == "tet" and self.settings.integration == "exact":
             return self._raymarch_exact(mesh, camera, tf, size, order, window)
         if (shader == "tet" and order is None and self.settings.method != "projected"
-                and not (self.settings.method == "auto" and mesh.n_tets > AUTO_MAX_TETS)):
+                and not (self.settings.method == "auto" and not march_fits(mesh.n_tets))):
             # A new mesh's records, while the table is built (not for a mesh "auto" sends to
-            # projected tetrahedra by its size alone: 10M tets' records would pass 4.5 GB).
+            # projected tetrahedra for its size: 10M tets' records would pass 4.5 GB).
             self._march.prefetch(mesh)
         table = self.table(mesh, tf)
         self._use_table(table)
@@ -492,7 +494,7 @@ class Renderer(GLOwner):
     def _march_uniforms(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]) -> dict[str, Any]:
         view = camera.view_matrix()
         view[:3, 3] += view[:3, :3] @ mesh.float32_origin  # the records are relative to it
-        near, far = camera.clipping_range
+        near, far = camera.near_far()
         proj = camera.projection_matrix(size[0] / size[1])
         return dict(u_view=view, u_proj=proj, u_near=near, u_far=far,
                     u_ray_scale=(1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1])))
@@ -544,8 +546,9 @@ class Renderer(GLOwner):
         clipping range; ``+inf`` / ``-inf`` where no tet covers the pixel. These are the ray
         limits for fusing the mesh with a ray-cast volume (:mod:`tetvr.fuse`).
         """
+        camera = resolve_clipping_range(camera, mesh.bounds)
         if self._uses_raymarch(mesh):
-            size = self._check(size)
+            size = self._check(size, "raymarch")
             camera, uniforms = self._march_view(mesh, camera, size)
             ext = self._march.extent(mesh, camera, size, uniforms, self._clock)
             front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)
@@ -558,7 +561,8 @@ class Renderer(GLOwner):
                        ) -> NDArray[np.int64]:
         """Per pixel, how many ray--tet segments tet marching walks (no early termination):
         the measure of the ray caster's work (``bench/stages.py``)."""
-        size = self._check(size)
+        size = self._check(size, "raymarch")
+        camera = resolve_clipping_range(camera, mesh.bounds)
         camera, uniforms = self._march_view(mesh, camera, size)
         ext = self._march.extent(mesh, camera, size, uniforms, self._clock)
         return ext[..., 2].astype(np.int64)
@@ -590,5 +594,5 @@ def _outside_clipping_range(mesh: TetMesh, camera: Camera) -> tuple[bool, bool]:
     """Whether any point lies nearer than the near plane (then some tet may cross it), and
     whether any lies beyond the far plane."""
     depth = (mesh.points - np.asarray(camera.position)) @ np.asarray(camera.direction)
-    near, far = camera.clipping_range
+    near, far = camera.near_far()
     return bool(depth.min() < near), bool(depth.max() > far)

@@ -123,14 +123,13 @@ class SurfacePass:
 
         return cached_targets(self.ctx, self._targets, size, self._make_target)
 
-    def _make_target(self, size: tuple[int, int]) -> dict[str, Any]:
+    def _make_target(self, size: tuple[int, int], t: dict[str, Any]) -> None:
         ctx = self.ctx
-        t = {"color": ctx.texture(size, 4, dtype="f4"), "depth": ctx.texture(size, 1, dtype="f4"),
-             "zbuffer": ctx.depth_texture(size)}
+        t.update(color=ctx.texture(size, 4, dtype="f4"), depth=ctx.texture(size, 1, dtype="f4"),
+                 zbuffer=ctx.depth_texture(size))
         t["depth"].filter = (_NEAREST, _NEAREST)
         t["fbo"] = ctx.framebuffer(color_attachments=[t["color"], t["depth"]], depth_attachment=t["zbuffer"])
         t["depth_fbo"] = ctx.framebuffer(color_attachments=[t["depth"]])
-        return t
 
     # ---- the frame ----
     def draw(self, surfaces: Sequence[Surface], camera: Camera, size: tuple[int, int],
@@ -141,7 +140,7 @@ class SurfacePass:
         self._upload(surfaces, origin)
         view = camera.view_matrix()
         view[:3, 3] += view[:3, :3] @ origin
-        near, far = camera.clipping_range
+        near, far = camera.near_far()
         proj = camera.projection_matrix(size[0] / size[1])
         prog = self.owner._program("surface", PERSPECTIVE=int(not camera.parallel_projection))
         from tetvr.gl.util import set_uniforms

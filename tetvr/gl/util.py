@@ -11,13 +11,14 @@ from typing import TYPE_CHECKING, Any, Callable, Concatenate, Iterator, ParamSpe
 
 import numpy as np
 
-from tetvr.core.image import _gib, check_memory, image_size
+from tetvr.core.image import _gib, image_size
+from tetvr.gl.framesize import FrameMemoryError, check_frame
 from tetvr.gl.context import ForkedProcessError, check_not_forked, context_alive, context_lock, current_in_thread
 
 if TYPE_CHECKING:
     from tetvr.optics.table import PreintegrationTable
 
-__all__ = ["GLOwner", "gl_locked", "locked", "check_size", "clear_gl_errors", "free_video_memory", "make_target", "set_uniforms",
+__all__ = ["GLOwner", "gl_locked", "locked", "check_size", "is_software", "clear_gl_errors", "free_video_memory", "make_target", "set_uniforms",
            "table_texture", "Clock"]
 
 
@@ -138,15 +139,18 @@ _SOFTWARE_GL = ("llvmpipe", "softpipe", "swrast")
 _LLVMPIPE_TEXTURE_BYTES = 1 << 31
 
 
-def check_size(size: tuple[int, int], ctx: Any, *, bytes_per_pixel: int = 16) -> tuple[int, int]:
+def check_size(size: tuple[int, int], ctx: Any, *, bytes_per_pixel: int = 16, method: str = "projected",
+               surfaces: bool = False) -> tuple[int, int]:
     """(width, height) as ints, checked against the GL's real limits before any GL call.
 
     Each side must be within ``GL_MAX_TEXTURE_SIZE``, ``GL_MAX_RENDERBUFFER_SIZE`` and
-    ``GL_MAX_VIEWPORT_DIMS`` (``ValueError``); the render target of ``bytes_per_pixel``
-    (16: RGBA float32) must fit the GL's memory (llvmpipe's per-texture limit, or the
-    free video memory where the driver reports it) and its readback the host's
-    (``MemoryError``, naming the sizes). A frame that would fail half-way through
-    making its target fails here instead, with the renderer untouched.
+    ``GL_MAX_VIEWPORT_DIMS`` (``ValueError``); the largest render target, of
+    ``bytes_per_pixel`` (16: RGBA float32), must fit the GL's memory (llvmpipe's
+    per-texture limit), and the frame of ``method`` (:mod:`tetvr.gl.framesize`: every
+    target, the readback) the free video memory where the driver reports it and the
+    host's memory (:class:`~tetvr.gl.framesize.FrameMemoryError`, naming the sizes). A
+    frame that would fail half-way through making its targets fails here instead, with
+    the renderer untouched.
     """
     width, height = image_size(size)
     info = ctx.info
@@ -160,18 +164,23 @@ def check_size(size: tuple[int, int], ctx: Any, *, bytes_per_pixel: int = 16) ->
                          + ", ".join(f"{k} {v}" for k, v in limits.items()))
     need = width * height * bytes_per_pixel
     what = f"a {width}x{height} image ({bytes_per_pixel} bytes a pixel)"
-    renderer = str(info.get("GL_RENDERER", "")).lower()
-    software = any(name in renderer for name in _SOFTWARE_GL)
+    software = is_software(ctx)
     if software and _mipmapped_bytes(width, height, bytes_per_pixel) > _LLVMPIPE_TEXTURE_BYTES:
         raise MemoryError(f"{what} needs a {_gib(need)} render target; {info.get('GL_RENDERER', 'this GL')} "
                           f"makes textures of at most {_gib(_LLVMPIPE_TEXTURE_BYTES * 3 // 4)}: render it smaller")
+    estimate = check_frame((width, height), method, software=software, surfaces=surfaces)
     free = None if software else free_video_memory(ctx)
-    if free is not None and need > free:
-        raise MemoryError(f"{what} needs a {_gib(need)} render target; the GPU reports {_gib(free)} free")
-    # The readback holds the pixels twice (the bytes read and the flipped image); a
-    # software rasteriser's target is in host memory as well.
-    check_memory((3 if software else 2) * need, f"rendering {what}")
+    if free is not None and estimate.gpu > free:
+        raise FrameMemoryError(f"a {width}x{height} frame needs {_gib(estimate.gpu)} of render targets; the GPU "
+                               f"reports {_gib(free)} free: render it smaller", size=(width, height), method=method,
+                               need=estimate.gpu, available=free)
     return width, height
+
+
+def is_software(ctx: Any) -> bool:
+    """Whether ``ctx`` is a Mesa software rasteriser's (its textures live in host memory)."""
+    renderer = str(ctx.info.get("GL_RENDERER", "")).lower()
+    return any(name in renderer for name in _SOFTWARE_GL)
 
 
 def _mipmapped_bytes(width: int, height: int, bytes_per_pixel: int) -> int:
@@ -350,14 +359,34 @@ def tf_points_texture(ctx: Any, tf: Any) -> Any:
 
 def cached_targets(ctx: Any, targets: dict[Any, dict[str, Any]], size: tuple[int, int],
                    make: Any, keep: int = 2) -> dict[str, Any]:
-    """The render-target set of this size from ``targets``, made by ``make(size)`` on first
-    use; beyond ``keep`` sizes the old sets are released first (a window being resized
-    would otherwise keep one set per size it passed through)."""
+    """The render-target set of this size from ``targets``, made by ``make(size, t)`` (which
+    fills the dict ``t``) on first use; beyond ``keep`` sizes the old sets are released
+    first (a window being resized would otherwise keep one set per size it passed through).
+
+    A set the GL could not make (a texture out of memory, a framebuffer it calls
+    incomplete) is released, whatever of it was made, and named in a ``MemoryError``
+    (``GL_OUT_OF_MEMORY``, or an incomplete framebuffer, which is how a software GL
+    reports a texture it could not allocate) or a ``RuntimeError``, with the size.
+    """
     t = targets.get(size)
     if t is None:
         if len(targets) >= keep:
             drop_targets(ctx, targets)
-        t = targets[size] = make(size)
+        t = {}
+        try:
+            make(size, t)
+            err = ctx.error
+            if err != "GL_NO_ERROR":
+                raise RuntimeError(err)
+        except Exception as exc:
+            drop_targets(ctx, {size: t})
+            pending = [str(exc)] + clear_gl_errors(ctx)
+            what = (f"could not make the {size[0]}x{size[1]} render targets ({', '.join(pending)}); "
+                    f"the GL probably ran out of memory for a frame of this size: render it smaller")
+            if any("OUT_OF_MEMORY" in p or "not complete" in p for p in pending):
+                raise MemoryError(what) from exc
+            raise RuntimeError(what) from exc
+        targets[size] = t
     return t
 
 

@@ -12,8 +12,10 @@ These are small XML files that name other files (VTK's XML formats, which meshio
 
 :func:`tetvr.read` reads all three (a ``.pvd`` with several steps: its first, with a
 warning). Merging happens before the field is chosen and cell data become point data, so a
-merged mesh is the mesh the solver split: points the pieces share (equal coordinates) are
-joined, and ghost cells (``vtkGhostType``'s duplicate bit) are left out.
+merged mesh is the mesh the solver split: points the pieces share (equal coordinates and
+equal values) are joined, coincident nodes that differ stay apart as in one file, and ghost
+cells (``vtkGhostType``'s duplicate bit, :func:`without_ghosts`) are left out, merged or read
+alone.
 
 Examples
 --------
@@ -38,7 +40,7 @@ import numpy as np
 from tetvr.core.checks import check_input_file, short_path, warn
 
 __all__ = ["COLLECTION_SUFFIXES", "Collection", "TimeStep", "is_collection", "leaf_files", "pieces", "read_pvd",
-           "merged_meshio"]
+           "merged_meshio", "without_ghosts"]
 
 #: File suffixes read here (lower case).
 COLLECTION_SUFFIXES = (".pvd", ".vtm", ".pvtu")
@@ -46,6 +48,8 @@ COLLECTION_SUFFIXES = (".pvd", ".vtm", ".pvtu")
 _MAX_DEPTH = 16
 # vtkGhostType bit of a cell another piece owns (vtkDataSetAttributes::DUPLICATECELL).
 _DUPLICATE_CELL = 1
+# Ghost arrays: bits (VTK XML files from version 2.0 on) and, before, levels.
+_GHOST_ARRAYS = ("vtkGhostType", "vtkGhostLevels")
 
 # The time step that read() of a .pvd takes (read_step sets it; the default is the first).
 _STEP: contextvars.ContextVar[int | None] = contextvars.ContextVar("tetvr_pvd_step", default=None)
@@ -205,16 +209,17 @@ def _times_text(times: tuple[float, ...]) -> str:
 
 
 def _merge(parts: list[tuple[str, Any]], path: str) -> Any:
-    """One meshio mesh from several: points with equal coordinates joined, ghost cells
-    dropped, the fields every part has kept (the others with a warning)."""
+    """One meshio mesh from several: ghost cells dropped, points with equal coordinates and
+    equal values joined, the fields every part has kept (the others with a warning)."""
     import meshio
 
-    if len(parts) == 1 and "vtkGhostType" not in parts[0][1].cell_data:
+    parts = [(f, without_ghosts(m)) for f, m in parts]
+    if len(parts) == 1:
         return parts[0][1]
     point_fields = _common(path, "point", [(f, {k: np.asarray(v) for k, v in m.point_data.items()})
                                            for f, m in parts])
     cell_names = _common(path, "cell", [(f, {k: np.asarray(v[0]) if v else np.zeros(0)
-                                             for k, v in m.cell_data.items() if k != "vtkGhostType"})
+                                             for k, v in m.cell_data.items()})
                                         for f, m in parts])
     points, cells, pdata = [], [], {k: [] for k in point_fields}  # type: ignore[var-annotated]
     cdata: dict[str, list[Any]] = {k: [] for k in cell_names}
@@ -225,17 +230,11 @@ def _merge(parts: list[tuple[str, Any]], path: str) -> Any:
             pts = np.c_[pts, np.zeros(pts.shape[0])]
         if pts.ndim != 2 or pts.shape[1] != 3:
             raise ValueError(f"{short_path(f)!r}: points of shape {pts.shape}, expected (n, 3)")
-        ghosts = m.cell_data.get("vtkGhostType")
         for b, block in enumerate(m.cells):
-            data = np.asarray(block.data)
-            keep = np.ones(len(data), dtype=bool)
-            if ghosts is not None and b < len(ghosts):
-                keep = (np.asarray(ghosts[b]).reshape(-1).astype(np.int64) & _DUPLICATE_CELL) == 0
-            if not keep.any():
-                continue
-            cells.append((block.type, data[keep].astype(np.int64) + offset))
-            for k in cell_names:
-                cdata[k].append(np.asarray(m.cell_data[k][b])[keep])
+            if len(block.data):
+                cells.append((block.type, np.asarray(block.data).astype(np.int64) + offset))
+                for k in cell_names:
+                    cdata[k].append(np.asarray(m.cell_data[k][b]))
         points.append(pts)
         for k in point_fields:
             pdata[k].append(np.asarray(m.point_data[k]))
@@ -243,14 +242,100 @@ def _merge(parts: list[tuple[str, Any]], path: str) -> Any:
     if not cells:
         raise ValueError(f"{short_path(path)!r}: its pieces hold no cells (all ghost cells?)")
     allpts = np.concatenate(points)
-    # Pieces repeat the points on the faces they share, with equal coordinates: joined, so the
-    # merged mesh is connected there (the ray caster walks across) and cell fields average
-    # across the seam as in one file.
-    uniq, first, inverse = np.unique(allpts, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    cells = [(t, inverse[d]) for t, d in cells]
-    pd = {k: np.concatenate(v)[first] for k, v in pdata.items()}
-    return meshio.Mesh(uniq, cells, point_data=pd, cell_data=cdata)
+    fields = {k: np.concatenate(v) for k, v in pdata.items()}
+    # Pieces repeat the points on the faces they share: joined, so the merged mesh is
+    # connected there (the ray caster walks across) and cell fields average across the
+    # seam as in one file. A point is joined only to one with the same values too: a
+    # solver's coincident nodes (an interface with a jump) stay apart, as in one file.
+    ids = _unwelded_where_collapsed(_welded(allpts, list(fields.values())), cells)
+    # The points kept in the order of their coordinates (a mesh numbered so comes back as it was).
+    keep = np.unique(ids)
+    keep = keep[np.lexsort((keep, allpts[keep, 2], allpts[keep, 1], allpts[keep, 0]))]
+    number = np.empty(allpts.shape[0], dtype=np.int64)
+    number[keep] = np.arange(keep.shape[0])
+    cells = [(t, number[ids[d]]) for t, d in cells]
+    return meshio.Mesh(allpts[keep], cells, point_data={k: v[keep] for k, v in fields.items()}, cell_data=cdata)
+
+
+def without_ghosts(mesh: Any) -> Any:
+    """A meshio mesh without its ghost cells and ghost arrays.
+
+    A parallel writer repeats, in each piece, cells that another piece owns
+    (``vtkGhostType`` with the ``DUPLICATECELL`` bit; ``vtkGhostLevels`` above 0 in files
+    VTK wrote before version 2.0): dropped, so that no cell is counted twice. The mesh is
+    returned as it is when it has no ghost arrays.
+
+    Examples
+    --------
+    >>> import meshio
+    >>> m = meshio.Mesh(np.eye(4, 3), [("tetra", [[0, 1, 2, 3], [3, 2, 1, 0]])],
+    ...                 cell_data={"vtkGhostType": [np.array([0, 1], np.uint8)]})
+    >>> without_ghosts(m).cells[0].data.tolist(), list(without_ghosts(m).cell_data)
+    ([[0, 1, 2, 3]], [])
+    """
+    import meshio
+
+    if not any(n in mesh.cell_data or n in mesh.point_data for n in _GHOST_ARRAYS):
+        return mesh
+    # meshio.Mesh has checked that every cell array holds one value per cell.
+    keeps = [np.ones(len(block.data), dtype=bool) for block in mesh.cells]
+    if "vtkGhostType" in mesh.cell_data:  # bits, from version 2.0 on
+        keeps = [(np.asarray(g).reshape(-1).astype(np.int64) & _DUPLICATE_CELL) == 0
+                 for g in mesh.cell_data["vtkGhostType"]]
+    elif "vtkGhostLevels" in mesh.cell_data:  # levels, before
+        keeps = [np.asarray(g).reshape(-1) == 0 for g in mesh.cell_data["vtkGhostLevels"]]
+    cells = [(block.type, np.asarray(block.data)[k]) for block, k in zip(mesh.cells, keeps)]
+    cell_data = {n: [np.asarray(v)[k] for v, k in zip(blocks, keeps)]
+                 for n, blocks in mesh.cell_data.items() if n not in _GHOST_ARRAYS}
+    point_data = {n: v for n, v in mesh.point_data.items() if n not in _GHOST_ARRAYS}
+    return meshio.Mesh(mesh.points, cells, point_data=point_data, cell_data=cell_data)
+
+
+def _welded(points: np.ndarray, fields: list[np.ndarray]) -> np.ndarray:
+    """Each point's id after joining: the lowest id of the points with exactly its
+    coordinates (``-0.0`` is ``0.0``) and its values in every numeric field (a NaN equals
+    nothing)."""
+    n = points.shape[0]
+    pts = points + 0.0
+    ids = np.arange(n)
+    order = np.lexsort((pts[:, 2], pts[:, 1], pts[:, 0]))
+    same = np.all(pts[order][1:] == pts[order][:-1], axis=1)
+    if not same.any():
+        return ids
+    # Only the points that share their coordinates with another are compared by value.
+    shared = np.zeros(n, dtype=bool)
+    shared[order[1:][same]] = True
+    shared[order[:-1][same]] = True
+    sub = np.nonzero(shared)[0]
+    key = np.concatenate([pts[sub]] + [np.asarray(f)[sub].reshape(len(sub), -1).astype(np.float64) + 0.0
+                                       for f in fields if np.asarray(f).dtype.kind in "biuf"], axis=1)
+    o = np.lexsort(key.T[::-1])  # stable: equal rows stay in id order, the lowest first
+    equal = np.all(key[o][1:] == key[o][:-1], axis=1)
+    first = np.maximum.accumulate(np.where(np.r_[True, ~equal], np.arange(len(o)), 0))
+    ids[sub[o]] = sub[o[first]]
+    return ids
+
+
+def _unwelded_where_collapsed(ids: np.ndarray, cells: list[tuple[str, np.ndarray]]) -> np.ndarray:
+    """``ids`` with the points of every cell that joining would give a repeated vertex
+    kept apart: such a cell has two corners at one place (zero volume), and stays what
+    it is in one file, a flat cell :meth:`tetvr.TetMesh.from_arrays` drops with its
+    warning, instead of a cell that repeats a vertex."""
+    apart = []
+    for _, data in cells:
+        if data.ndim != 2 or data.shape[1] < 2:
+            continue
+        joined = np.sort(ids[data], axis=1)
+        before = np.sort(data, axis=1)
+        collapsed = np.any(joined[:, 1:] == joined[:, :-1], axis=1) & ~np.any(before[:, 1:] == before[:, :-1], axis=1)
+        if collapsed.any():
+            apart.append(data[collapsed].ravel())
+    if not apart:
+        return ids
+    out = ids.copy()
+    corners = np.concatenate(apart)
+    out[corners] = corners
+    return out
 
 
 def _common(path: str, kind: str, fields: list[tuple[str, dict[str, np.ndarray]]]) -> list[str]:

@@ -12,7 +12,9 @@ import dataclasses
 import io
 import math
 import os
-from collections.abc import Callable
+import re
+import tempfile
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -21,7 +23,8 @@ from numpy.typing import NDArray
 from tetvr.core.checks import check_input_file, warn
 from tetvr.io.legacy_vtk import is_legacy_vtk, read_legacy_vtk
 from tetvr.mesh.cells import CellSplit, split_cells
-from tetvr.mesh.tetmesh import TetMesh, _cell_to_point, _check_cell_data, _field_to_scalar
+from tetvr.mesh.fields import _check_named_field, _field_to_scalar, _scalar_of, choose_field
+from tetvr.mesh.tetmesh import TetMesh, _cell_to_point, _check_cell_data
 
 __all__ = ["TetCells", "read", "read_cells"]
 
@@ -38,8 +41,10 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
         multiblock or ``.pvtu`` partitioned grid (merged), a ``.pvd`` (its first time step;
         :mod:`tetvr.io.collections` reads the others).
     scalars : name of the point or cell field to render; by default the first point
-        field, else the first cell field. Vector fields render by magnitude, or by
-        ``component`` when given.
+        field that varies, else the first cell field that varies (a constant field is
+        passed over with a warning naming it; :func:`tetvr.mesh.fields.choose_field`).
+        Vector fields render by magnitude, or by ``component`` when given
+        (``mesh.report.scalar_of`` says which).
     cell_data : ``"exact"`` (default): a cell field is rendered constant in each cell, as
         the solver wrote it (a cell split into tets gives each its value);
         ``"average"``: it becomes point data by volume-weighted averaging (each point takes
@@ -75,29 +80,33 @@ def read(path: str | os.PathLike[str], scalars: str | None = None, *, component:
 
     point_names = list(m.point_data)
     cell_names = list(m.cell_data)
+    named = scalars is not None
     if scalars is None:
-        if point_names:
-            scalars = point_names[0]
-        elif cell_names:
-            scalars = cell_names[0]
-        else:
+        # The first field that varies: a constant one draws a shape in one colour.
+        fields = [(n, m.point_data[n]) for n in point_names] + [(n, m.cell_data[n]) for n in cell_names
+                                                                if n not in m.point_data]
+        if not fields:
             raise ValueError(f"{path!r} has no point or cell data to render")
+        scalars = choose_field(fields, component, os.path.basename(path))
     if scalars in m.point_data:
         values = _field_to_scalar(m.point_data[scalars], scalars, component)
-        source = "point"
+        scalar_of, source = _scalar_of(m.point_data[scalars], component), "point"
     elif scalars in m.cell_data:
         cell_values = _field_to_scalar(m.cell_data[scalars], scalars, component).astype(np.float64)
         values = _cell_to_point(m.points, tets, cell_values)
-        source = "cell"
+        scalar_of, source = _scalar_of(m.cell_data[scalars], component), "cell"
     else:
         raise KeyError(
             f"no field named {scalars!r} in {path!r}; point fields: {point_names}, cell fields: {cell_names}"
         )
+    if named:
+        _check_named_field(cell_values if source == "cell" else values, scalars, os.path.basename(path))
     mesh = TetMesh.from_arrays(m.points, tets, values, scalar_name=scalars,
                                cell_scalars=cell_values if source == "cell" and exact_cells else None)
     report = dataclasses.replace(mesh.report, ignored_cells=m.split.ignored, scalar_source=source,
                                  split_cells=m.split.split, steiner_points=m.split.steiner_points,
-                                 fields=tuple(point_names) + tuple(n for n in cell_names if n not in m.point_data))
+                                 fields=tuple(point_names) + tuple(n for n in cell_names if n not in m.point_data),
+                                 scalar_of=scalar_of)
     return dataclasses.replace(mesh, report=report)
 
 
@@ -295,6 +304,9 @@ def _meshio_read(path: str) -> Any:
                     f: Any = _GuardedBytes(raw) if _LOOPS_AT_EOF[fmt] == "rb" else _GuardedText(io.BufferedReader(raw))
                     with f:
                         m = meshio.read(f, file_format=fmt)
+                elif fmt == "vtu":
+                    with _vtu_meshio_reads(path) as readable:
+                        m = meshio.read(readable, file_format=fmt)
                 else:
                     m = meshio.read(path, file_format=fmt)
         except (Exception, SystemExit) as exc:  # SystemExit: meshio exits when a reader rejects a file
@@ -315,12 +327,47 @@ def _meshio_read(path: str) -> Any:
 
 def _read_any(path: str) -> Any:
     """The dispatch: ParaView's collections (.pvd, .vtm, .pvtu) to :mod:`tetvr.io.collections`,
-    which merges their files read by :func:`_meshio_read`; any other file to meshio."""
-    from tetvr.io.collections import is_collection, merged_meshio
+    which merges their files read by :func:`_meshio_read`; any other file to meshio (a
+    parallel writer's piece without its ghost cells)."""
+    from tetvr.io.collections import is_collection, merged_meshio, without_ghosts
 
     if is_collection(path):
         return merged_meshio(path, meshio_read=_meshio_read)
-    return _meshio_read(path)
+    return without_ghosts(_meshio_read(path))
+
+
+# The root element's version attribute of a VTK XML file.
+_VTK_XML_VERSION = re.compile(rb"<VTKFile\b[^>]*?\sversion\s*=\s*[\"']([^\"']*)[\"']")
+
+
+@contextlib.contextmanager
+def _vtu_meshio_reads(path: str) -> Iterator[str]:
+    """``path``, or a copy of it with the version meshio's VTU reader knows.
+
+    VTK 9 writes version "2.0" .. "2.3" where 8 wrote "1.0" once a file holds a ghost array
+    (``vtkGhostType``, which a parallel solver's pieces hold), and meshio refuses any version
+    but 0.1 and 1.0. Their layout is 1.0's for every cell but polyhedra (2.3 stores their
+    faces in new arrays, refused here by name) and the high-order nodes of Lagrange
+    hexahedra (tetvr uses only their corners); read with the version set to "1.0", each
+    array is the one VTK's own reader returns.
+    """
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    found = _VTK_XML_VERSION.search(head)
+    if found is None or not found.group(1).startswith(b"2."):
+        yield path
+        return
+    with open(path, "rb") as f:
+        data = f.read()
+    if b'"face_connectivity"' in data:
+        raise ValueError(f"VTK XML version {found.group(1).decode()} polyhedron cells (face_connectivity) "
+                         "are not read by tetvr; split them into tetrahedra first")
+    with tempfile.TemporaryDirectory(prefix="tetvr-vtu-") as folder:
+        copy = os.path.join(folder, os.path.basename(path))
+        with open(copy, "wb") as f:
+            f.write(data[:found.start(1)] + b"1.0" + data[found.end(1):])
+        del data
+        yield copy
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

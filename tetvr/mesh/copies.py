@@ -48,7 +48,10 @@ class DistinctCells:
     n_conflicting: int
 
 
-_CACHE: dict[int, DistinctCells] = {}
+# id(mesh) -> its DistinctCells, or for a mesh with no repeated cell only its count of
+# conflicting cells: an entry holding the mesh itself would keep it alive for ever (and the
+# finalizer that drops the entry would never run).
+_CACHE: dict[int, DistinctCells | int] = {}
 _LOCK = threading.Lock()
 
 
@@ -66,11 +69,13 @@ def distinct_cells(mesh: TetMesh) -> DistinctCells:
     True
     """
     cached = _CACHE.get(id(mesh))
+    if isinstance(cached, int):
+        return DistinctCells(mesh, None, 0, cached)
     if cached is not None:
         return cached
     found = _find(mesh)
     with _LOCK:
-        _CACHE[id(mesh)] = found
+        _CACHE[id(mesh)] = found.n_conflicting if found.mesh is mesh else found
         weakref.finalize(mesh, _CACHE.pop, id(mesh), None)
     return found
 

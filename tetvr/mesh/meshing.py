@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tetvr.core.camera import Camera
+from tetvr.core.camera import Camera, resolve_clipping_range
 from tetvr.mesh.tetmesh import TetMesh
 
 __all__ = ["DETAILS", "MeshingResult", "interpolate", "locate", "pixel_footprint", "tetrahedralize"]
@@ -119,7 +119,7 @@ def pixel_footprint(camera: Camera, size: tuple[int, int], points: ArrayLike) ->
         return 2.0 * camera.parallel_scale / height
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     depth = float(((p - np.asarray(camera.position)) @ np.asarray(camera.direction)).min())
-    depth = max(depth, camera.clipping_range[0])
+    depth = max(depth, resolve_clipping_range(camera, p).near_far()[0])
     return 2.0 * depth * math.tan(math.radians(camera.view_angle) / 2) / height
 
 

@@ -54,7 +54,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tetvr.mesh.adjacency import FACE_VERTICES, face_adjacency
-from tetvr.core.camera import Camera
+from tetvr.core.camera import Camera, resolve_clipping_range
 from tetvr.mesh.tetmesh import TetMesh
 
 __all__ = ["MarchRecords", "march_records", "near_plane_cells", "rim_faces", "folded_faces", "RECORD_TEXELS"]
@@ -295,7 +295,8 @@ def near_plane_cells(mesh: TetMesh, camera: Camera, aspect: float) -> tuple[NDAr
     where tet ``ids[i]`` meets the near plane (clamped to the viewport). A ray's point on
     the near plane lies in one of these tets exactly when the ray starts inside the mesh.
     """
-    near = camera.clipping_range[0]
+    camera = resolve_clipping_range(camera, mesh.bounds)
+    near = camera.near_far()[0]
     view = camera.view_matrix()
     depth = -(mesh.points @ view[2, :3] + view[2, 3])
     if not depth.min() < near <= depth.max():
@@ -350,6 +351,9 @@ def rim_faces(rec: MarchRecords, camera: Camera, size: tuple[int, int]
     width, height = size
     planes = rec.boundary_planes
     tri = rec.boundary_triangles
+    if camera.clipping_range is None:  # from the data: the boundary's corners bound the mesh
+        corners = tri.reshape(-1, 3).astype(np.float64) + rec.origin
+        camera = resolve_clipping_range(camera, corners if len(corners) else rec.origin[None])
     view = camera.view_matrix()
     if camera.parallel_projection:
         edge_on = np.abs(planes[:, :3] @ view[2, :3]) < EDGE_ON_SINE
@@ -374,7 +378,7 @@ def rim_faces(rec: MarchRecords, camera: Camera, size: tuple[int, int]
     if camera.parallel_projection:
         ahead = np.ones(idx.size, dtype=bool)
     else:
-        ahead = (-eye_pts[..., 2]).min(axis=1) > camera.clipping_range[0]
+        ahead = (-eye_pts[..., 2]).min(axis=1) > camera.near_far()[0]
     exclusive = core[idx] & ahead
     if not ahead.all():  # a face left to the rasteriser keeps its neighbours with it
         behind = np.zeros(planes.shape[0], dtype=bool)

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tetvr.core.checks import warn
+from tetvr.mesh.fields import _check_named_field, _field_to_scalar, _scalar_of, choose_field
 
 __all__ = ["TetMesh", "MeshReport"]
 
@@ -36,6 +37,9 @@ class MeshReport:
     split_cells: tuple[tuple[str, int], ...] = ()  # non-tet volume cells split into tets (tetvr.mesh.cells)
     steiner_points: int = 0  # cell centroids added where a cell could not be split otherwise
     fields: tuple[str, ...] = ()  # the file's point fields, then its cell fields (by :func:`read`)
+    #: How the rendered scalar comes from a field with several components: ``"magnitude"``,
+    #: ``"component 1"``; empty for a scalar field (or arrays given as they are).
+    scalar_of: str = ""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -311,7 +315,8 @@ class TetMesh:
         if not np.all(np.isfinite(s)):
             raise ValueError(f"scalars contain {int(np.sum(~np.isfinite(s)))} NaN or Inf values")
         s.setflags(write=False)
-        return dataclasses.replace(self, scalars=s, scalar_name=name, cell_scalars=None)
+        return dataclasses.replace(self, scalars=s, scalar_name=name, cell_scalars=None,
+                                   report=self._report_for(name))
 
     def with_cell_scalars(self, cell_scalars: ArrayLike, name: str = "scalars") -> "TetMesh":
         """The same geometry with a cell field (one value per tet, in this mesh's tet
@@ -324,7 +329,13 @@ class TetMesh:
         s = _cell_to_point(self.points, self.tets.astype(np.int64), c)
         c.setflags(write=False)
         s.setflags(write=False)
-        return dataclasses.replace(self, scalars=s, scalar_name=name, cell_scalars=c)
+        return dataclasses.replace(self, scalars=s, scalar_name=name, cell_scalars=c,
+                                   report=self._report_for(name))
+
+    def _report_for(self, name: str) -> MeshReport:
+        """The report of this mesh with the field ``name``: the same field (a time step's
+        values) keeps how it was made a scalar (``scalar_of``), another field has none."""
+        return self.report if name == self.scalar_name else dataclasses.replace(self.report, scalar_of="")
 
     def averaged(self) -> "TetMesh":
         """Cell data made point data by volume-weighted averaging around each point (the
@@ -422,21 +433,10 @@ def _max_edge(points: NDArray[np.float64], tets: NDArray[np.integer[Any]]) -> ND
     return np.max([np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in pairs], axis=0)
 
 
-def _field_to_scalar(values: NDArray[Any], name: str, component: int | None) -> NDArray[np.float64]:
-    v = np.asarray(values)
-    if v.ndim == 2 and v.shape[1] == 1:
-        v = v[:, 0]
-    if v.ndim == 1 and component not in (None, 0):
-        raise ValueError(f"field {name!r} is a scalar field; component {component} is out of range")
-    if v.ndim == 2:
-        if component is None:
-            return np.linalg.norm(v.astype(np.float64), axis=1)
-        if not 0 <= component < v.shape[1]:
-            raise ValueError(f"field {name!r} has {v.shape[1]} components; component {component} is out of range")
-        return v[:, component].astype(np.float64)
-    if v.ndim != 1:
-        raise ValueError(f"field {name!r} has unsupported shape {v.shape}")
-    return v
+def _cell_column(blocks: list[NDArray[Any]]) -> NDArray[Any]:
+    """A cell field held as one array per cell block, as one array (a column for a scalar)."""
+    flat = np.concatenate([np.asarray(b).reshape(len(b), -1) for b in blocks])
+    return flat[:, 0] if flat.shape[1] == 1 else flat
 
 
 # VTK cell type ids -> meshio's cell names (the volume cells tetvr splits, and what is left out).
@@ -467,10 +467,10 @@ def _from_blocks(points: ArrayLike, blocks: list[tuple[str, Any]], point_data: d
     if split.split or split.ignored:
         warn(f"{where}: {split.summary()}")
     names = list(point_data) + [n for n in cell_blocks if n not in point_data]
+    named = scalars is not None
     if scalars is None:
-        if not names:
-            raise ValueError(f"{where} has no point or cell data to render")
-        scalars = names[0]
+        scalars = choose_field([(n, point_data[n] if n in point_data else _cell_column(cell_blocks[n])) for n in names],
+                               component, where)
     used = np.zeros(split.points.shape[0], dtype=bool)
     used[split.tets.ravel()] = True
     if scalars in point_data:
@@ -479,6 +479,7 @@ def _from_blocks(points: ArrayLike, blocks: list[tuple[str, Any]], point_data: d
             raise ValueError(f"{where}: point field {scalars!r} has {v.shape[0] if v.ndim else 0} values, "
                              f"but the mesh has {pts.shape[0]} points")
         values = _field_to_scalar(split.extend(v), scalars, component)
+        scalar_of = _scalar_of(v, component)
         source = "point"
     elif scalars in cell_blocks:
         flat = np.concatenate([np.asarray(b).reshape(len(b), -1) for b in cell_blocks[scalars]])
@@ -488,18 +489,22 @@ def _from_blocks(points: ArrayLike, blocks: list[tuple[str, Any]], point_data: d
         col = flat[split.parent]
         cell_values = _field_to_scalar(col[:, 0] if col.shape[1] == 1 else col, scalars, component)
         cell_values = cell_values.astype(np.float64)
+        scalar_of = _scalar_of(col, component)
         values = _cell_to_point(split.points, split.tets.astype(np.int64), cell_values)
         source = "cell"
     else:
         raise KeyError(f"no field named {scalars!r} in {where}; point fields: {list(point_data)}, "
                        f"cell fields: {list(cell_blocks)}")
+    if named:
+        _check_named_field(cell_values if source == "cell" else values, scalars, where)
     if not np.all(used):
         values = values[used]
         split = split.compacted(used)
     mesh = TetMesh.from_arrays(split.points, split.tets, values, scalar_name=scalars,
                                cell_scalars=cell_values if source == "cell" and exact_cells else None)
     report = dataclasses.replace(mesh.report, ignored_cells=split.ignored, scalar_source=source,
-                                 split_cells=split.split, steiner_points=split.steiner_points, fields=tuple(names))
+                                 split_cells=split.split, steiner_points=split.steiner_points, fields=tuple(names),
+                                 scalar_of=scalar_of)
     return dataclasses.replace(mesh, report=report)
 
 

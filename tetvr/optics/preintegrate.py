@@ -49,9 +49,9 @@ from numpy.typing import NDArray
 
 from tetvr.core.image import check_memory
 from tetvr.optics.model import MAX_OPACITY, OPTICS, mean_neg_log
-from tetvr.optics.table import (PreintegrationTable, aligned_scalar_range, check_table_size, check_unit_distance,
-                                table_build_bytes, table_scalar_range)
-from tetvr.optics.tablewarp import extinction_cells, node_opacity_cells, warped_nodes
+from tetvr.optics.table import (STEP_GAP, PreintegrationTable, aligned_nodes, check_table_size, check_unit_distance,
+                                node_limits, table_build_bytes, table_scalar_range)
+from tetvr.optics.tablewarp import extinction_cells, max_warped_nodes, node_opacity_cells, warped_nodes
 from tetvr.optics.transfer import TransferFunction
 
 __all__ = ["build_table", "table_for"]
@@ -80,15 +80,17 @@ def table_for(
 
     The scalar axis spans :func:`table_scalar_range`: the union of the data range and
     the transfer function's domain; with ``align_nodes`` its nodes are placed on the
-    transfer function's control points where that helps (:func:`aligned_scalar_range`);
-    with ``warp`` they are placed where the transfer function varies instead
+    transfer function's steps or control points where that helps
+    (:func:`~tetvr.optics.table.aligned_nodes`, which may add a few nodes to put every
+    step on one); with ``warp`` they are placed where the transfer function varies instead
     (:mod:`tetvr.optics.tablewarp`; ``align_nodes`` does not apply).
     """
     # Thicknesses are rounded up to 7 significant digits so near-equal meshes share a table.
     d_top = float(f"{d_max * (1 + 1e-6):.7g}")
     rng = table_scalar_range(data_range, tf)
     if align_nodes and not warp:
-        rng = aligned_scalar_range(rng, tf, n_bins)
+        lo, hi, n_bins = aligned_nodes(rng, tf, n_bins)
+        rng = (lo, hi)
     return _cached(tf, rng, d_top, n_bins=n_bins, n_slices=n_slices,
                    log_base=float(log_base), encoding=encoding, dtype=dtype, optics=optics, warp=bool(warp))
 
@@ -120,9 +122,14 @@ def build_table(
     optics : "exact" (``tau = -ln(1 - a)/u``), "linear" (``tau = a/u``, VTK's unstructured
         mappers) or "vtk" (``tau = a/u`` and the mean of the end colours, unattenuated: the
         fragment formula of VTK's projected tetrahedra); see :data:`tetvr.optics.model.OPTICS`.
-    warp : place the ``n_bins`` nodes where the transfer function varies, every control
-        point on a node (:func:`tetvr.optics.tablewarp.warped_nodes`), instead of evenly; the
+    warp : place the ``n_bins`` nodes where the transfer function varies, control points
+        on nodes (:func:`tetvr.optics.tablewarp.warped_nodes`; at most
+        :func:`~tetvr.optics.tablewarp.max_warped_nodes`), instead of evenly; the
         table's ``nodes`` then says where they are.
+
+    A node on a step of the transfer function (:func:`~tetvr.optics.table.node_limits`)
+    ends the bin below it with the step's lower side and starts the bin above with its
+    upper side, so bands of constant colour are integrated exactly.
 
     Examples
     --------
@@ -132,14 +139,10 @@ def build_table(
     """
     lo, hi, n_bins, n_slices, u = _checked(tf, scalar_range, d_max, n_bins, n_slices, log_base, encoding, dtype, warp,
                                            optics)
-    warped = warped_nodes(tf, (lo, hi), n_bins) if warp else None
-    nodes = warped if warped is not None else np.linspace(lo, hi, n_bins)
-    n_bins = nodes.size  # a warped table may hold a few more (control points)
-    check_memory(table_build_bytes(n_bins, n_slices, warp=warp),
-                 f"building a {n_bins} x {n_bins} x {n_slices + 1} pre-integration table")
-    width = np.diff(nodes) * ((n_bins - 1) / (hi - lo)) if warped is not None else np.ones(n_bins - 1)
-    color, opacity = tf.evaluate(nodes)
-    tau_node, tau_bin = _extinction(opacity, u, optics)
+    nodes, warped, width = _placed_nodes(tf, lo, hi, n_bins, n_slices, warp)
+    n_bins = nodes.size
+    color, opacity, ends = _node_values(tf, nodes, optics)
+    tau_node, tau_bin = _extinction(opacity, u, optics, ends[2:])
     thick = _slice_thicknesses(d_max, log_base, n_slices)
 
     # Built as [k, sf, sb] (each step of the run recurrence writes one contiguous row) and
@@ -164,12 +167,12 @@ def build_table(
         rgb[:, i_idx, i_idx, :] = color[None] * (-np.expm1(-thick[:, None] * tau_node[None]))[..., None]
         # Off-diagonal: the incremental recurrence, forwards (sb > sf) and on the mirrored axis.
         if warped is None:
-            _fill_runs(rgb, color, tau_bin, thick)
+            _fill_runs(rgb, ends[:2], tau_bin, thick)
         else:
-            _fill_runs_uneven(rgb, color, tau_bin, width, thick)
+            _fill_runs_uneven(rgb, ends[:2], tau_bin, width, thick)
     # Slice 0's colour in a "normalized" table: the thin limit, or VTK's mean of the end colours.
     thin = None if encoding == "premultiplied" else mean_color if mean_color is not None else _thin_limit(
-        color, tau_bin * width, tau_node, prefix)
+        color, ends[:2], tau_bin * width, tau_node, prefix)
     data, alpha_scale = _encoded(rgb, mean_tau, thin, thick, encoding, dtype, optics)
     return _finished(data, tf, lo, hi, thick, log_base, encoding, alpha_scale, warped, optics)
 
@@ -200,17 +203,52 @@ def _checked(tf: TransferFunction, scalar_range: tuple[float, float], d_max: flo
     return lo, hi, n_bins, n_slices, u
 
 
-def _extinction(opacity: NDArray[np.float64], u: float, optics: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Extinction at each node, and its exact mean over each bin between two nodes."""
+def _placed_nodes(tf: TransferFunction, lo: float, hi: float, n_bins: int, n_slices: int, warp: bool) -> tuple[
+        NDArray[np.float64], NDArray[np.float64] | None, NDArray[np.float64]]:
+    """The table's scalar nodes, the warped ones (or None) and each bin's width in units of
+    the first's (even: ones), once the memory the largest such table needs is known to be
+    there (a warped one may hold a few more nodes, up to max_warped_nodes): refused before
+    any work."""
+    most = max_warped_nodes(n_bins) if warp else n_bins
+    check_memory(table_build_bytes(n_bins, n_slices, warp=warp),
+                 f"building a {most} x {most} x {n_slices + 1} pre-integration table")
+    warped = warped_nodes(tf, (lo, hi), n_bins) if warp else None
+    if warped is None:
+        return np.linspace(lo, hi, n_bins), None, np.ones(n_bins - 1)
+    return warped, warped, np.diff(warped) * ((warped.size - 1) / (hi - lo))
+
+
+def _node_values(tf: TransferFunction, nodes: NDArray[np.float64], optics: str) -> tuple[
+        NDArray[np.float64], NDArray[np.float64], tuple[NDArray[np.float64], ...]]:
+    """The colour and opacity at each node, and at the two ends of each bin: ``(colour at
+    its start, colour at its end, opacity at its start, opacity at its end)``, the values at
+    the nodes but where a node sits on a step (:func:`~tetvr.optics.table.node_limits`):
+    there each bin takes the step's side it lies on, and the node itself their mean."""
+    color, opacity = tf.evaluate(nodes)
+    sides = None
+    if optics != "vtk":  # VTK's projected tetrahedra read the colour at the vertices as it is
+        sides = node_limits(tf, nodes, STEP_GAP * float(nodes[-1] - nodes[0]))
+    if sides is None:
+        return color, opacity, (color[:-1], color[1:], opacity[:-1], opacity[1:])
+    c_below, c_above, o_below, o_above = sides
+    return (0.5 * (c_below + c_above), 0.5 * (o_below + o_above),
+            (c_above[:-1], c_below[1:], o_above[:-1], o_below[1:]))
+
+
+def _extinction(opacity: NDArray[np.float64], u: float, optics: str,
+                ends: tuple[NDArray[np.float64], ...] | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Extinction at each node, and its exact mean over each bin between two nodes (from
+    the opacity at each bin's two ends: ``ends``, else the nodes')."""
     if optics not in OPTICS:
         raise ValueError(f"optics must be one of {OPTICS}, got {optics!r}")
+    start, end = ends if ends is not None else (opacity[:-1], opacity[1:])
     if optics == "exact":
-        x = 1.0 - np.clip(opacity, 0.0, MAX_OPACITY)
-        tau_node = -np.log(x) / u
-        tau_bin = mean_neg_log(x[:-1], x[1:]) / u  # exact mean extinction over each bin
+        tau_node = -np.log(1.0 - np.clip(opacity, 0.0, MAX_OPACITY)) / u
+        # The exact mean extinction over each bin.
+        tau_bin = mean_neg_log(1.0 - np.clip(start, 0.0, MAX_OPACITY), 1.0 - np.clip(end, 0.0, MAX_OPACITY)) / u
     else:  # tau = a/u is linear in the scalar between nodes: its bin mean is the midpoint
         tau_node = np.clip(opacity, 0.0, 1.0) / u
-        tau_bin = 0.5 * (tau_node[:-1] + tau_node[1:])
+        tau_bin = 0.5 * (np.clip(start, 0.0, 1.0) / u + np.clip(end, 0.0, 1.0) / u)
     return tau_node, tau_bin
 
 
@@ -285,19 +323,19 @@ def _finished(data: NDArray[np.generic], tf: TransferFunction, lo: float, hi: fl
 _cached = functools.lru_cache(maxsize=32)(build_table)
 
 
-def _fill_runs(rgb: NDArray[np.float64], color: NDArray[np.float64], tau_bin: NDArray[np.float64],
+def _fill_runs(rgb: NDArray[np.float64], ends: tuple[NDArray[np.float64], ...], tau_bin: NDArray[np.float64],
                thick: NDArray[np.floating[Any]]) -> None:
     """Premultiplied colour of every run of bins, for every slice, written in place:
     ``rgb[k, sf, sb]`` for ``sf != sb`` is the segment from node sf to node sb crossed in
-    total length ``thick[k]`` (clipped at 0).
+    total length ``thick[k]`` (clipped at 0); ``ends``: each bin's colour at its start and end.
 
     Runs of the same length n share one step length d/n, so each diagonal is a sliding
     window, filled from the last front node down by the stable add-front/remove-back
     recurrence; the recurrence runs once forwards (sb > sf) and once on the mirrored axis.
     """
-    n_bins = color.shape[0]
-    nb = n_bins - 1
-    n = np.arange(1, n_bins)  # run lengths
+    start, end = ends
+    nb = start.shape[0]
+    n = np.arange(1, nb + 1)  # run lengths
     step = thick[:, None] / n[None, :]  # [k, n]
     # Per-bin emission and transmittance for each step length, bin first ([m, k, n]) so
     # that each step of the recurrence reads one contiguous block.
@@ -306,7 +344,7 @@ def _fill_runs(rgb: NDArray[np.float64], color: NDArray[np.float64], tau_bin: ND
     with np.errstate(invalid="ignore", divide="ignore"):
         phi = np.where(th > 1e-12, -np.expm1(-th) / np.where(th > 0, th, 1.0), 1.0 - 0.5 * th)
     emits = th > 0  # a transparent bin emits nothing (guards rounding)
-    dc = color[1:] - color[:-1]
+    dc = end - start
 
     def bin_colours(start: NDArray[np.float64], end: NDArray[np.float64], slope: NDArray[np.float64]) -> NDArray[np.float64]:
         # Emission of each bin crossed from its start node to its end node: [m, 3, k, n].
@@ -321,10 +359,10 @@ def _fill_runs(rgb: NDArray[np.float64], color: NDArray[np.float64], tau_bin: ND
 
     for forwards in (True, False):
         if forwards:  # front node i, bins i .. i+n-1
-            c_bin = bin_colours(color[:-1], color[1:], dc)
+            c_bin = bin_colours(start, end, dc)
             t_run, taus = t_bin, tau_bin
         else:  # mirrored: front node N-1-i, bins N-2-i down to N-1-i-n (the same bins reversed)
-            c_bin = bin_colours(color[1:], color[:-1], -dc)[::-1]
+            c_bin = bin_colours(end, start, -dc)[::-1]
             t_run, taus = t_bin[::-1], tau_bin[::-1]
         prefix = np.concatenate([[0.0], np.cumsum(taus)])
         # leaving[i, :, k, j] = c_bin[i + j + 1, :, k, j]: the bin leaving a run of j + 1
@@ -350,7 +388,7 @@ def _fill_runs(rgb: NDArray[np.float64], color: NDArray[np.float64], tau_bin: ND
                 np.maximum(w_out[:, :f], 0.0, out=rgb[:, f, f - 1::-1, :])
 
 
-def _fill_runs_uneven(rgb: NDArray[np.float64], color: NDArray[np.float64], tau_bin: NDArray[np.float64],
+def _fill_runs_uneven(rgb: NDArray[np.float64], ends: tuple[NDArray[np.float64], ...], tau_bin: NDArray[np.float64],
                       width: NDArray[np.float64], thick: NDArray[np.floating[Any]]) -> None:
     """:func:`_fill_runs` for nodes ``width`` apart (bin by bin, in any unit): ``rgb[k, sf, sb]``.
 
@@ -364,13 +402,13 @@ def _fill_runs_uneven(rgb: NDArray[np.float64], color: NDArray[np.float64], tau_
     exponentials (N^2 K for the even table), which is why warped tables have fewer nodes.
     (Transmittances are running products of the bins', as in the even recurrence.)
     """
-    n_bins = color.shape[0]
-    nb = n_bins - 1
+    start, end = ends
+    nb = start.shape[0]
     for forwards in (True, False):
         if forwards:
-            c0, c1, w, taus = color[:-1], color[1:], width, tau_bin
+            c0, c1, w, taus = start, end, width, tau_bin
         else:  # mirrored axis: node N-1-i, bins in reverse with their colours swapped
-            c0, c1, w, taus = color[:0:-1], color[-2::-1], width[::-1], tau_bin[::-1]
+            c0, c1, w, taus = end[::-1], start[::-1], width[::-1], tau_bin[::-1]
         x = np.concatenate([[0.0], np.cumsum(w)])
         tw = taus * w
         depth = np.concatenate([[0.0], np.cumsum(tw)])  # optical depth per unit q up to each node
@@ -401,14 +439,15 @@ def _fill_runs_uneven(rgb: NDArray[np.float64], color: NDArray[np.float64], tau_
                 rgb[:, f, f - 1::-1, :] = acc.transpose(1, 0, 2)
 
 
-def _thin_limit(color: NDArray[np.float64], tau_bin: NDArray[np.float64], tau_node: NDArray[np.float64],
-                prefix: NDArray[np.float64]) -> NDArray[np.float64]:
+def _thin_limit(color: NDArray[np.float64], ends: tuple[NDArray[np.float64], ...], tau_bin: NDArray[np.float64],
+                tau_node: NDArray[np.float64], prefix: NDArray[np.float64]) -> NDArray[np.float64]:
     """Colour per unit alpha as thickness -> 0: the extinction-weighted mean colour.
 
-    ``prefix`` is the prefix sum of ``tau_bin`` (``prefix[i]``: the sum over bins < i).
+    ``color`` is the colour at each node, ``ends`` each bin's at its start and end, and
+    ``prefix`` the prefix sum of ``tau_bin`` (``prefix[i]``: the sum over bins < i).
     """
     n_bins = color.shape[0]
-    weighted = tau_bin[:, None] * 0.5 * (color[:-1] + color[1:])
+    weighted = tau_bin[:, None] * 0.5 * (ends[0] + ends[1])
     q = np.concatenate([np.zeros((1, 3)), np.cumsum(weighted, axis=0)])
     num = np.abs(q[:, None, :] - q[None, :, :])  # [sb, sf] symmetric
     den = np.abs(prefix[:, None] - prefix[None, :])

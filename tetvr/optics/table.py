@@ -16,10 +16,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tetvr.optics.tablewarp import WARP_CELLS, warp_cells, warp_extinction
+from tetvr.optics.tablewarp import WARP_CELLS, max_warped_nodes, warp_cells, warp_extinction
 from tetvr.optics.transfer import TransferFunction
 
-__all__ = ["PreintegrationTable", "table_scalar_range", "aligned_scalar_range", "fewest_spacings",
+__all__ = ["PreintegrationTable", "table_scalar_range", "aligned_scalar_range", "aligned_nodes", "fewest_spacings",
+           "step_positions", "node_limits", "interpolate_limits", "STEP_GAP", "STEP_EXTRA_NODES", "MAX_STEP_NODES",
            "table_build_bytes", "check_table_size", "check_unit_distance", "ALIGN_MIN_FRACTION",
            "ALIGN_MIN_RAMP_BINS", "MAX_TABLE_BUILD_BYTES", "MAX_THICKNESS_SPAN", "MIN_UNIT_DISTANCE",
            "TABLE_BUILD_BYTES_PER_ENTRY", "TABLE_BUILD_BYTES_PER_ENTRY_WARPED"]
@@ -49,13 +50,16 @@ MIN_UNIT_DISTANCE = 1e-300
 
 def table_build_bytes(n_bins: int, n_slices: int, *, warp: bool = False) -> int:
     """Peak memory of :func:`~tetvr.optics.preintegrate.build_table` for ``n_bins`` x
-    ``n_bins`` x ``n_slices + 1`` entries, in bytes (an upper bound of what was measured).
+    ``n_bins`` x ``n_slices + 1`` entries, in bytes (an upper bound of what was measured);
+    with ``warp``, for the most nodes a warped table of ``n_bins`` may hold
+    (:func:`~tetvr.optics.tablewarp.max_warped_nodes`).
 
     >>> table_build_bytes(256, 16) / 2**20
     136.0
     """
     per_entry = TABLE_BUILD_BYTES_PER_ENTRY_WARPED if warp else TABLE_BUILD_BYTES_PER_ENTRY
-    return per_entry * int(n_bins) ** 2 * (int(n_slices) + 1)
+    nodes = max_warped_nodes(n_bins) if warp else int(n_bins)
+    return per_entry * nodes ** 2 * (int(n_slices) + 1)
 
 
 def check_table_size(n_bins: int, n_slices: int, log_base: float | None = None, *, warp: bool = False,
@@ -65,10 +69,12 @@ def check_table_size(n_bins: int, n_slices: int, log_base: float | None = None, 
     the sizes (``names``: how the caller calls the three arguments)."""
     need = table_build_bytes(n_bins, n_slices, warp=warp)
     if need > MAX_TABLE_BUILD_BYTES:
+        n = max_warped_nodes(n_bins) if warp else n_bins
         raise ValueError(
-            f"{names[0]}={n_bins} with {names[1]}={n_slices} is a {n_bins} x {n_bins} x {n_slices + 1} table "
-            f"({n_bins * n_bins * (n_slices + 1):,} entries) whose build needs {need / 2**30:.3g} GiB, more than "
-            f"the {MAX_TABLE_BUILD_BYTES / 2**30:g} GiB allowed; use fewer bins or slices")
+            f"{names[0]}={n_bins} with {names[1]}={n_slices} is a {'warped table of up to ' if warp else ''}"
+            f"{n} x {n} x {n_slices + 1} {'' if warp else 'table '}({n * n * (n_slices + 1):,} entries) whose build "
+            f"needs {need / 2**30:.3g} GiB, more than the {MAX_TABLE_BUILD_BYTES / 2**30:g} GiB allowed; use fewer "
+            "bins or slices")
     if log_base is not None and n_slices > 1:
         # In logarithms: log_base ** (K - 1) itself may overflow.
         exponent = (n_slices - 1) * math.log10(float(log_base))
@@ -259,6 +265,11 @@ ALIGN_MIN_FRACTION = 0.9
 ALIGN_MIN_RAMP_BINS = 10.0
 
 
+#: Elements of :func:`aligned_scalar_range`'s cost matrix (candidate spacings x control
+#: points) evaluated at once.
+_COST_CHUNK = 1 << 20
+
+
 def fewest_spacings(n_bins: int) -> int:
     """The fewest node spacings :func:`aligned_scalar_range` may put over the range
     (its widest spacing is ``(hi - lo) / fewest_spacings(n_bins)``)."""
@@ -307,15 +318,20 @@ def aligned_scalar_range(scalar_range: tuple[float, float], tf: TransferFunction
     n = int(n_bins)
     if n < 3 or not hi > lo:
         return lo, hi
-    color, opacity = np.asarray(tf.color, dtype=np.float64), np.asarray(tf.opacity, dtype=np.float64)
+    color, opacity = tf.point_arrays
     cx, ox = (color[:, 0] - lo) / (hi - lo), (opacity[:, 0] - lo) / (hi - lo)
     narrowest = min(float(np.diff(x).min()) if x.size > 1 else 1.0 for x in (cx, ox))
+    if narrowest * (n - 1) < ALIGN_MIN_RAMP_BINS:  # no spacing can pass the test below: no work
+        return lo, hi
     u = np.unique(np.concatenate([cx, ox]))
     jump = _slope_jumps(cx, color[:, 1:], u) + _slope_jumps(ox, opacity[:, 1:], u)
     ms = np.arange(n - 1, fewest_spacings(n) - 1, -1, dtype=np.float64)  # finest first
-    x = u[None, :] * ms[:, None]
-    f = np.abs(x - np.round(x))  # distance to the nearest node, in spacings (rounding: ~1e-13 on one)
-    cost = (jump[None, :] * f * (1.0 - f)).sum(axis=1) / ms
+    cost = np.empty_like(ms)
+    rows = max(1, _COST_CHUNK // max(u.size, 1))  # memory O(points), however many points
+    for i in range(0, ms.size, rows):
+        x = u[None, :] * ms[i:i + rows, None]
+        f = np.abs(x - np.round(x))  # distance to the nearest node, in spacings (rounding: ~1e-13 on one)
+        cost[i:i + rows] = (jump[None, :] * f * (1.0 - f)).sum(axis=1) / ms[i:i + rows]
     # Costs equal up to rounding are a tie, which goes to the finest spacing (the first).
     best = int(np.argmax(cost <= cost.min() + 1e-9 * (jump.sum() / ms[0])))
     m = float(ms[best])
@@ -323,3 +339,140 @@ def aligned_scalar_range(scalar_range: tuple[float, float], tf: TransferFunction
         return lo, hi
     return lo, lo + (n - 1) * (hi - lo) / m
 
+
+
+#: Consecutive control points of one map (colour or opacity) closer than this fraction of a
+#: table's scalar span make a *step*: a jump no node spacing resolves (ParaView's discretized
+#: colour maps put the two sides of each band edge 1e-9 of the range apart). A table with a
+#: node on a step takes each bin's ends from the step's sides (:func:`node_limits`), so
+#: the bands are exact and only the interpolation between entries across the step is left.
+STEP_GAP = 1e-6
+#: Nodes that :func:`aligned_nodes` may add to N (N // STEP_EXTRA_NODES at most) to put
+#: every step on a node: 256 bands over the table's whole range need 257 or 513 nodes, over
+#: the default colour range (the 1st to 99.5th percentile of the field, ~80 % of its range
+#: on the synthetic cubes) 325 or 649.
+STEP_EXTRA_NODES = 2
+#: ... and never beyond this many nodes (unless N is more): the 3D texture side every
+#: OpenGL 4.3 holds (``GL_MAX_3D_TEXTURE_SIZE`` >= 2048), which the renderers check N against.
+MAX_STEP_NODES = 2048
+
+
+def step_positions(tf: TransferFunction, span: float) -> NDArray[np.float64]:
+    """The scalars of the transfer function's steps (:data:`STEP_GAP` of ``span``), each the
+    middle of its run of close control points, ascending.
+
+    >>> tf = TransferFunction(color=((0, 0, 0, 0), (0.5 - 1e-9, 0, 0, 0), (0.5, 1, 1, 1), (1, 1, 1, 1)),
+    ...                       opacity=((0, 0.5), (1, 0.5)))
+    >>> step_positions(tf, 1.0).round(6).tolist()
+    [0.5]
+    """
+    found = []
+    for rows in tf.point_arrays:
+        x = rows[:, 0]
+        close = np.diff(x) < STEP_GAP * span
+        if not close.any():
+            continue
+        # Runs of close gaps: from a close gap after a wide one to the last close one.
+        edge = np.diff(np.concatenate([[False], close, [False]]).astype(np.int8))
+        first, last = np.nonzero(edge == 1)[0], np.nonzero(edge == -1)[0]
+        found.append(0.5 * (x[first] + x[last]))
+    return np.unique(np.concatenate(found)) if found else np.empty(0)
+
+
+def node_limits(tf: TransferFunction, nodes: NDArray[np.float64], tol: float
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None:
+    """The colour and opacity just below and just above each node, ``(colour_below,
+    colour_above, opacity_below, opacity_above)``, where a node sits on a step: with two
+    or more control points of a map within ``tol`` of a node, below is the first one's value
+    and above the last one's; elsewhere both are the value at the node. None where no
+    node sits on a step (then both sides are ``tf.evaluate(nodes)``)."""
+    spans = []
+    for rows in tf.point_arrays:
+        x = rows[:, 0]
+        first = np.searchsorted(x, nodes - tol, side="left")
+        last = np.searchsorted(x, nodes + tol, side="right") - 1
+        spans.append((first, last, last > first))
+    if not any(on.any() for _, _, on in spans):
+        return None
+    color, opacity = tf.evaluate(nodes)
+    sides = []
+    for (first, last, on), at, rows in zip(spans, (color, opacity[:, None]), tf.point_arrays):
+        below, above = at.copy(), at.copy()
+        below[on], above[on] = rows[first[on], 1:], rows[last[on], 1:]
+        sides += [below, above]
+    return sides[0], sides[1], sides[2][:, 0], sides[3][:, 0]
+
+
+def interpolate_limits(s: NDArray[np.float64], nodes: NDArray[np.float64], below: NDArray[np.float64],
+                       above: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Values at ``s`` linear in each bin from ``above`` at its first node to ``below`` at
+    its last (:func:`node_limits`), clamped at the ends: what a table holds between nodes.
+
+    >>> interpolate_limits(np.array([0.25, 0.75]), np.array([0.0, 0.5, 1.0]), np.array([0.0, 0.0, 1.0]),
+    ...                    np.array([0.0, 1.0, 1.0])).tolist()
+    [0.0, 1.0]
+    """
+    j = np.clip(np.searchsorted(nodes, s, side="right") - 1, 0, nodes.size - 2)
+    t = np.clip((s - nodes[j]) / (nodes[j + 1] - nodes[j]), 0.0, 1.0)
+    if below.ndim > 1:
+        t = t[..., None]
+    return above[j] * (1.0 - t) + below[j + 1] * t  # type: ignore[no-any-return]
+
+
+def aligned_nodes(scalar_range: tuple[float, float], tf: TransferFunction, n_bins: int
+                  ) -> tuple[float, float, int]:
+    """The first and last scalar node and the node count of an aligned table of about ``n_bins`` nodes.
+
+    Where the transfer function has steps (:func:`step_positions`) and evenly spaced nodes
+    can hold them all, with at most ``n_bins // STEP_EXTRA_NODES`` nodes more (and at most
+    :data:`MAX_STEP_NODES` in all, unless ``n_bins`` is more) and a spacing no
+    wider than :func:`aligned_scalar_range`'s, the nodes are such a lattice, the fewest of at
+    least ``n_bins`` nodes (it may start a rounding below the range; lookups clamp there as
+    at the end); elsewhere they are :func:`aligned_scalar_range`'s ``n_bins`` nodes.
+
+    >>> bands = [(k / 4 + d, k / 4, k / 4, k / 4) for k in range(4) for d in (0.0, 0.25 - 1e-9)]
+    >>> tf = TransferFunction(color=bands, opacity=((0, 0.5), (1, 0.5)))  # four bands of 1/4
+    >>> lo, hi, n = aligned_nodes((0.0, 1.0), tf, 256)
+    >>> lo, round(hi, 6), n  # a node on every band edge k / 4
+    (0.0, 1.0, 257)
+    """
+    lo, hi = (float(v) for v in scalar_range)
+    n = int(n_bins)
+    lattice = _step_lattice(lo, hi, tf, n) if n >= 3 and hi > lo else None
+    if lattice is not None:
+        return lattice
+    lo, hi = aligned_scalar_range((lo, hi), tf, n)
+    return lo, hi, n
+
+
+def _step_lattice(lo: float, hi: float, tf: TransferFunction, n: int) -> tuple[float, float, int] | None:
+    """:func:`aligned_nodes`' lattice through every step, or None."""
+    span = hi - lo
+    steps = step_positions(tf, span)
+    most = max(n, min(n + n // STEP_EXTRA_NODES, MAX_STEP_NODES))
+    if steps.size == 0 or steps.size > most:
+        return None
+    widest, tol = span / fewest_spacings(n), 0.25 * STEP_GAP * span
+    # Spacings that put every step on a node: the steps' span over j (one step: any spacing).
+    reach = float(steps[-1] - steps[0])
+    candidates = [reach / j for j in range(most, 0, -1)] if steps.size > 1 else [span / (n - 1)]
+    fits = []
+    for h in candidates:
+        if h > widest:
+            break
+        k = (steps - steps[0]) / h
+        if np.abs(k - np.round(k)).max() * h > tol:
+            continue
+        # Nodes from the first step down to the range's start and up to its end (one within
+        # rounding of an end is on it).
+        below = math.ceil((steps[0] - lo - tol) / h)
+        count = below + math.ceil((hi - steps[0] - tol) / h) + 1
+        if count <= most:
+            first = float(steps[0]) - below * h
+            # A step within rounding of the range's start: the lattice starts there.
+            fits.append((lo if abs(first - lo) <= tol else first, h, count))
+    if not fits:
+        return None
+    # The fewest nodes of at least n (else the most): the n-node table, its steps on nodes.
+    first, h, count = min(fits, key=lambda f: (f[2] < n, abs(f[2] - n)))
+    return first, first + (count - 1) * h, count

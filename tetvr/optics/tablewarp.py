@@ -14,7 +14,10 @@ places mesh nodes by equidistributing a monitor function: half of the nodes even
 range, half by the variation of the opacity and the opacity-weighted colour, and every
 control point of the transfer function on a node. Between two nodes the transfer function
 is then exactly linear, as the table assumes (:func:`tetvr.optics.preintegrate.build_table` with
-``warp=True`` builds the entries at these nodes).
+``warp=True`` builds the entries at these nodes). The build's work grows with the cube of
+the node count, so only N / 4 control points get nodes of their own: where a map has more
+(a 256-point colour map, thousands of spikes, a discretized map's band edges), those the
+table would miss most (:func:`max_warped_nodes` bounds the count).
 
 The GPU finds a scalar's fractional node index through a small texture of ``cells`` equal
 cells over the table's range (:func:`warp_cells`): no node spacing is narrower than a cell,
@@ -31,7 +34,8 @@ from numpy.typing import NDArray
 from tetvr.optics.model import MAX_OPACITY, mean_neg_log
 from tetvr.optics.transfer import TransferFunction
 
-__all__ = ["warped_nodes", "warp_cells", "extinction_cells", "node_opacity_cells", "warp_extinction", "WARP_CELLS", "WARP_EVEN_SHARE"]
+__all__ = ["warped_nodes", "warp_cells", "extinction_cells", "node_opacity_cells", "warp_extinction", "max_warped_nodes",
+           "WARP_CELLS", "WARP_EVEN_SHARE", "WARP_EXTRA_NODES"]
 
 #: Cells of the warp texture over the table's scalar range: the narrowest node spacing.
 WARP_CELLS = 8192
@@ -39,6 +43,20 @@ WARP_CELLS = 8192
 #: function's variation): keeps the smooth stretches, where thick segments still bend the
 #: integral, from being left with too few nodes.
 WARP_EVEN_SHARE = 0.5
+#: Control points that get a node of their own, at most N // WARP_EXTRA_NODES of them
+#: (those the table would miss most, :func:`_fixed_points`), on top of the N placed by
+#: variation: the build's work grows with the cube of the node count, so a map of 256 colour
+#: points (a matplotlib colour map) or thousands of opacity spikes must not set it.
+WARP_EXTRA_NODES = 4
+
+
+def max_warped_nodes(n_bins: int) -> int:
+    """The most nodes :func:`warped_nodes` returns for ``n_bins``.
+
+    >>> max_warped_nodes(128)
+    162
+    """
+    return int(n_bins) + int(n_bins) // WARP_EXTRA_NODES + 2
 
 
 def _variation_per_cell(tf: TransferFunction, lo: float, hi: float, cells: int) -> NDArray[np.float64]:
@@ -61,7 +79,9 @@ def warped_nodes(tf: TransferFunction, scalar_range: tuple[float, float], n_bins
     range on a node, and no two nodes closer than one of ``cells`` cells.
 
     The count is ``n_bins`` or a few more (control points are added where no node is
-    within a cell), fewer only where the cells cannot hold that many.
+    within a cell; where there are more than ``n_bins // WARP_EXTRA_NODES``, those whose
+    loss would cost most), at most :func:`max_warped_nodes`, fewer only where the cells
+    cannot hold that many.
 
     Examples
     --------
@@ -105,16 +125,15 @@ def warped_nodes(tf: TransferFunction, scalar_range: tuple[float, float], n_bins
     cum /= cum[-1]
     x_free = np.interp(np.linspace(0.0, 1.0, n), cum, np.arange(cells + 1.0))
     # Control points inside the range, and the two ends, are fixed nodes (in cell units).
-    bp = tf.breakpoints
-    fixed = np.unique(np.concatenate([[0.0, float(cells)], (bp[(bp > lo) & (bp < hi)] - lo) / (hi - lo) * cells]))
+    fixed = np.unique(np.concatenate([[0.0, float(cells)], _fixed_points(tf, lo, hi, n, cells)]))
     xs = np.concatenate([fixed, x_free])
     is_fixed = np.concatenate([np.ones(fixed.size, bool), np.zeros(x_free.size, bool)])
     order = np.lexsort((~is_fixed, xs))
     xs, is_fixed = xs[order], is_fixed[order]
     # A free node within a cell of a fixed one gives way; then, left to right, any node
     # within a cell of the last kept one (two control points closer than a cell: the first).
-    d_fixed = np.min(np.abs(xs[:, None] - fixed[None, :]), axis=1) if fixed.size < 4096 else None
-    keep_mask = is_fixed | (d_fixed >= 1.0 if d_fixed is not None else True)
+    d_fixed = np.min(np.abs(xs[:, None] - fixed[None, :]), axis=1)
+    keep_mask = is_fixed | (d_fixed >= 1.0)
     xs, is_fixed = xs[keep_mask], is_fixed[keep_mask]
     kept = [0]
     for k in range(1, xs.size):
@@ -128,6 +147,39 @@ def warped_nodes(tf: TransferFunction, scalar_range: tuple[float, float], n_bins
     nodes = lo + (hi - lo) * x / cells
     nodes[0], nodes[-1] = lo, hi
     return nodes
+
+
+def _fixed_points(tf: TransferFunction, lo: float, hi: float, n: int, cells: int) -> NDArray[np.float64]:
+    """The control points inside ``(lo, hi)`` that get nodes, in cells from ``lo``: all of
+    them up to ``n // WARP_EXTRA_NODES``; beyond, one per run of points closer than a cell
+    (its first), and of those the ones the table would miss most: the largest gap, in
+    opacity or opacity-weighted colour, between the point's value and the chord over its
+    neighbours, each taken at most one node spacing away (a step: about half its jump; a
+    spike's foot: half its height; a kink between far points: half its change of slope
+    times the spacing; a point of a smooth colour map: next to nothing)."""
+    bp = tf.breakpoints
+    x = (bp[(bp > lo) & (bp < hi)] - lo) / (hi - lo) * cells
+    most = n // WARP_EXTRA_NODES
+    if x.size <= most:
+        return x
+    x = x[np.concatenate([[True], np.diff(x) >= 1.0])]  # one per run (warped_nodes' loop then decides)
+    if x.size <= most:
+        return x
+    s = lo + (hi - lo) * x / cells
+    h = (hi - lo) / max(n - 1, 1)
+    around = np.concatenate([[lo], s, [hi]])
+    below = np.minimum(s - around[:-2], h)
+    above = np.minimum(around[2:] - s, h)
+
+    def weighted(at: NDArray[np.float64]) -> NDArray[np.float64]:
+        color, opacity = tf.evaluate(at)
+        return np.column_stack([opacity, color * opacity[:, None]])
+
+    w = (above / np.maximum(below + above, 1e-300))[:, None]  # the chord's weight on the point below
+    chord = w * weighted(s - below) + (1.0 - w) * weighted(s + above)
+    harm = np.abs(weighted(s) - chord).max(axis=1)
+    keep = np.sort(np.argpartition(-harm, most - 1)[:most]) if most > 0 else np.empty(0, np.int64)
+    return x[keep]
 
 
 def warp_cells(nodes: NDArray[np.float64], cells: int = WARP_CELLS) -> NDArray[np.float32]:

@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tetvr.core.checks import check_instances
-from tetvr.core.camera import Camera
+from tetvr.core.camera import Camera, resolve_clipping_range
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.optics.transfer import TransferFunction
 
@@ -139,10 +139,11 @@ def visible_cells(
 
 def outside_view(mesh: TetMesh, camera: Camera, *, size: tuple[int, int] | None = None) -> NDArray[np.bool_]:
     """(m,) True for the tets wholly outside one plane of the view frustum."""
+    camera = resolve_clipping_range(camera, mesh.bounds)
     view = camera.view_matrix()
     eye = mesh.points @ view[:3, :3].T + view[:3, 3]
     x, y, depth = eye[:, 0], eye[:, 1], -eye[:, 2]
-    near, far = camera.clipping_range
+    near, far = camera.near_far()
     scale = float(np.abs(eye).max()) if eye.size else 1.0
     slack = _PLANE_SLACK * max(scale, abs(near), abs(far), 1e-300)
     if camera.parallel_projection:

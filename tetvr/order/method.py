@@ -15,7 +15,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tetvr.core.camera import resolve_clipping_range
 from tetvr.core.checks import warn
+from tetvr.core.image import available_memory
 from tetvr.order.walkable import walk_check
 from tetvr.settings import RenderSettings
 
@@ -24,7 +26,7 @@ if TYPE_CHECKING:
     from tetvr.mesh.tetmesh import TetMesh
 
 __all__ = ["choose", "segments_per_tet", "RAYMARCH_ONLY", "PROJECTED_ONLY", "CROSSOVER_SEGMENTS_PER_TET",
-           "AUTO_MAX_TETS", "PROJECTED_NS_PER_TET", "PROJECTED_NS_PER_FRAGMENT", "MARCH_NS_PER_SEGMENT", "AUTO_MARGIN"]
+           "AUTO_MAX_TETS", "MARCH_BYTES_PER_TET", "MARCH_MEMORY_SHARE", "march_fits", "PROJECTED_NS_PER_TET", "PROJECTED_NS_PER_FRAGMENT", "MARCH_NS_PER_SEGMENT", "AUTO_MARGIN"]
 
 #: The measured cost model on llvmpipe at 512x512 (bench/results/stages.json, six meshes of
 #: 10k to 1M tets, wall time per frame; least squares): projected tetrahedra pay
@@ -47,11 +49,16 @@ AUTO_MARGIN = 1.5
 CROSSOVER_SEGMENTS_PER_TET = (
     AUTO_MARGIN * PROJECTED_NS_PER_TET / (MARCH_NS_PER_SEGMENT - AUTO_MARGIN * PROJECTED_NS_PER_FRAGMENT)
     if MARCH_NS_PER_SEGMENT > AUTO_MARGIN * PROJECTED_NS_PER_FRAGMENT else float("inf"))
-#: Above this many tets "auto" keeps projected tetrahedra, which draw in chunks with bounded
-#: memory (bench/memory.py: 10M tets in 3.5 GB of host memory); the ray caster holds every
-#: tet's record (96 B on the GPU, which llvmpipe keeps in host memory) and builds the face
-#: adjacency of the whole mesh (peak ~0.5 GB per million tets, like projected tetrahedra's
-#: unchunked path).
+#: Host memory tet marching takes per tet for a mesh's first frame on llvmpipe, which keeps
+#: GL textures in host memory: the records, the face adjacency and its temporaries
+#: (bench/results/frame_memory.json: 1,000 B a tet measured on 105k and 413k tets, beside
+#: the mesh's own 130; projected tetrahedra add 450 and draw in chunks).
+MARCH_BYTES_PER_TET = 1000
+#: "auto" takes tet marching for a mesh whose records take at most this share of the memory
+#: the system says is available (:func:`tetvr.core.image.available_memory`), else projected
+#: tetrahedra, which draw in chunks with bounded memory (bench/memory.py: 10M tets in 3.5 GB).
+MARCH_MEMORY_SHARE = 0.5
+#: Where the available memory is not known: "auto" takes tet marching up to this many tets.
 AUTO_MAX_TETS = 2_000_000
 _SAMPLE = 4096
 
@@ -76,7 +83,8 @@ def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Cam
       the same cell twice, faces held by more than two cells, folded faces, overlapping
       parts), with one warning naming what was found; ``method="raymarch"`` refuses them
       with the same words (ValueError);
-    * meshes above :data:`AUTO_MAX_TETS` (memory: projected tetrahedra draw in chunks);
+    * meshes whose records would not fit in memory (:func:`march_fits`: projected
+      tetrahedra draw in chunks);
     * given the camera and size, views from outside the mesh whose tets are so large on
       screen (:func:`segments_per_tet` above :data:`CROSSOVER_SEGMENTS_PER_TET`) that
       rasterising their few triangles is predicted 1.5x faster than walking their many
@@ -101,7 +109,7 @@ def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Cam
     if settings.optics == "vtk" or settings.framebuffer != "float32" or not settings.perspective_correct:
         return "projected"
     if mesh is not None:
-        if mesh.n_tets > AUTO_MAX_TETS:
+        if not march_fits(mesh.n_tets):
             return "projected"
         check = walk_check(mesh)
         if check.reasons:
@@ -117,6 +125,27 @@ def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Cam
                 and segments_per_tet(mesh, camera, size) > CROSSOVER_SEGMENTS_PER_TET):
             return "projected"
     return "raymarch"
+
+
+def march_fits(n_tets: int, available: int | None = -1) -> bool:
+    """Whether tet marching's records for ``n_tets`` tets (:data:`MARCH_BYTES_PER_TET` each)
+    take at most :data:`MARCH_MEMORY_SHARE` of the available memory (``available`` bytes;
+    by default what the system says, :func:`tetvr.core.image.available_memory`); where that
+    is not known, whether ``n_tets`` is at most :data:`AUTO_MAX_TETS`. What "auto" chooses
+    by, in place of a fixed count of tets.
+
+    Examples
+    --------
+    >>> march_fits(3_000_000, available=16 * 2**30), march_fits(3_000_000, available=4 * 2**30)
+    (True, False)
+    >>> march_fits(3_000_000, available=None)
+    False
+    """
+    if available == -1:
+        available = available_memory()
+    if available is None:
+        return n_tets <= AUTO_MAX_TETS
+    return n_tets * MARCH_BYTES_PER_TET <= MARCH_MEMORY_SHARE * available
 
 
 def _eye_near_mesh(mesh: "TetMesh", camera: "Camera") -> bool:
@@ -156,7 +185,7 @@ def segments_per_tet(mesh: "TetMesh", camera: "Camera", size: tuple[int, int]) -
     for a, b, c in faces:
         area += 0.5 * np.abs(np.cross(eye[:, b] - eye[:, a], eye[:, c] - eye[:, a])[:, 2])
     area *= 0.5  # front and back faces both cover the projection
-    near = camera.clipping_range[0]
+    near = resolve_clipping_range(camera, mesh.bounds).near_far()[0]
     if camera.parallel_projection:
         px_per_unit = size[1] / (2.0 * camera.parallel_scale)
         scale = np.full(ids.shape[0], px_per_unit**2)

@@ -17,7 +17,7 @@ import dataclasses
 
 import numpy as np
 
-from tetvr.core.camera import Camera
+from tetvr.core.camera import Camera, resolve_clipping_range
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.optics.transfer import TransferFunction
 
@@ -51,7 +51,7 @@ def check_view_precision(mesh: TetMesh, camera: Camera, size: tuple[int, int]) -
     radius = float(np.abs(mesh.bounds - centre).max())
     eye = np.asarray(camera.position, dtype=np.float64)
     magnitude = max(radius, float(np.abs(eye - centre).max()))
-    near, far = camera.clipping_range
+    near, far = resolve_clipping_range(camera, mesh.bounds).near_far()
     ulp = magnitude * _EPS32
     if camera.parallel_projection:
         footprint = 2.0 * camera.parallel_scale / size[1]
@@ -144,7 +144,8 @@ def float32_clipping_range(mesh: TetMesh, camera: Camera) -> Camera:
     >>> [round(v, 3) for v in float32_clipping_range(synthetic.cube(2, rotate=False), cam).clipping_range]
     [4.499, 5.501]
     """
-    near, far = camera.clipping_range
+    camera = resolve_clipping_range(camera, mesh.bounds)
+    near, far = camera.near_far()
     if max(abs(near), abs(far)) <= FLOAT32_CLIP_LIMIT:
         return camera
     view = camera.view_matrix()

@@ -54,6 +54,7 @@ import numpy as np
 
 from tetvr.core.camera import Camera
 from tetvr.mesh.adjacency import FaceAdjacency, face_adjacency
+from tetvr.mesh.locality import spatially_ordered
 from tetvr.mesh.copies import distinct_cells
 from tetvr.mesh.records import folded_faces
 from tetvr.mesh.tetmesh import TetMesh
@@ -154,7 +155,7 @@ def walk_check(mesh: TetMesh) -> WalkCheck:
     >>> walk_check(synthetic.merge(tet, tet.with_scalars(tet.scalars + 1))).reasons[0]
     '1 cells lie on the points of another cell with other values there'
     """
-    distinct = distinct_cells(mesh)
+    distinct = distinct_cells(spatially_ordered(mesh))  # the mesh tet marching walks
     mesh = distinct.mesh
     adj = face_adjacency(mesh)
     cached = _CACHE.get(id(adj))

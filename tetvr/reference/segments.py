@@ -24,7 +24,7 @@ from typing import Iterator, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from tetvr.core.camera import Camera
+from tetvr.core.camera import Camera, resolve_clipping_range
 from tetvr.core.checks import check_instances
 from tetvr.core.image import image_size
 from tetvr.core.rays import EyeRays
@@ -229,6 +229,25 @@ def _clip_chunk(geo: _TetGeometry, rays: EyeRays, tets: Int, counts: Int, box_w:
     row = geo.row_lo[tet] + k // w
     col = geo.col_lo[tet] + k % w
     del k, w
+    return _clip_pairs(geo, rays, tet, row, col)
+
+
+def _pixel_segments(geo: _TetGeometry, rays: EyeRays, pixels: Int, chunk: int) -> Iterator[RaySegments]:
+    """Ray-tet segments of the rays through ``pixels`` only (row * width + column): each
+    pixel's candidate tets are those whose box holds it, a few pixels at a time."""
+    per = max(1, chunk // max(1, geo.col_lo.shape[0]))
+    for start in range(0, pixels.size, per):
+        some = pixels[start:start + per]
+        row, col = some // rays.width, some % rays.width
+        inside = ((geo.col_lo[None, :] <= col[:, None]) & (col[:, None] <= geo.col_hi[None, :])
+                  & (geo.row_lo[None, :] <= row[:, None]) & (row[:, None] <= geo.row_hi[None, :]))
+        which, tet = np.nonzero(inside)
+        if tet.size:
+            yield _clip_pairs(geo, rays, tet, row[which], col[which])
+
+
+def _clip_pairs(geo: _TetGeometry, rays: EyeRays, tet: Int, row: Int, col: Int) -> RaySegments:
+    """Clip the ray of pixel (row, col) against tet ``tet``, for each such pair."""
     x = rays.x_col[col][:, None]
     y = rays.y_row[row][:, None]
     nx, ny = geo.nx[tet], geo.ny[tet]
@@ -325,6 +344,7 @@ def ray_segments(
     """
     width, height = _validate(mesh, camera, size)
     chunk = _check_chunk(chunk)
+    camera = resolve_clipping_range(camera, mesh.bounds)
     rays = EyeRays.from_camera(camera, width, height)
     geo = _tet_geometry(mesh, camera, rays)
     parts = list(_iter_segments(geo, rays, chunk))

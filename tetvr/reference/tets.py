@@ -49,7 +49,7 @@ from typing import Iterator, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from tetvr.core.camera import Camera
+from tetvr.core.camera import Camera, resolve_clipping_range, union_bounds
 from tetvr.core.clip import Clip, check_clip, ray_window
 from tetvr.core.image import check_memory
 from tetvr.core.rays import EyeRays
@@ -59,9 +59,10 @@ from tetvr.optics.model import OPTICS
 from tetvr.optics.table import check_unit_distance
 from tetvr.optics.transfer import TransferFunction
 from tetvr.reference.integrate import composite, integrate_segments
-from tetvr.reference.segments import DEFAULT_CHUNK, RaySegments, _check_chunk, _iter_segments, _tet_geometry, _TetGeometry, _validate
+from tetvr.reference.segments import (DEFAULT_CHUNK, RaySegments, _check_chunk, _iter_segments, _pixel_segments,
+                                      _tet_geometry, _TetGeometry, _validate)
 
-__all__ = ["render_reference"]
+__all__ = ["render_reference", "render_reference_pixels"]
 
 #: Bytes per pixel :func:`render_reference` holds whatever the mesh: the rays' lengths
 #: (float64), the composited float64 RGBA, one channel's bincount and the float32 result.
@@ -127,6 +128,8 @@ def render_reference(
     # Up front, not at the first allocation: a 100000 x 100000 image needs 600 GiB.
     check_memory(width * height * _BYTES_PER_PIXEL, f"a {width}x{height} reference image")
     clip, surfaces = check_clip(clip), check_surfaces(surfaces)
+    # No clipping range given: the one VTK would compute from everything this frame draws.
+    camera = resolve_clipping_range(camera, union_bounds(mesh.bounds, *(s.points for s in surfaces)))
     rays, hit_t, hit_rgb = _window(EyeRays.from_camera(camera, width, height), camera, clip, surfaces)
     image = _integrated_image(_tet_geometry(mesh, camera, rays), rays, tf, chunk=chunk, progress=progress,
                               optics=optics)
@@ -135,6 +138,59 @@ def render_reference(
         behind = np.concatenate([hit_rgb, hit[..., None].astype(np.float64)], axis=-1)
         image = image + (1.0 - image[..., 3:4]) * behind  # the tets over the surfaces
     return image.astype(np.float32)
+
+
+def render_reference_pixels(
+    mesh: TetMesh,
+    camera: Camera,
+    tf: TransferFunction,
+    size: tuple[int, int],
+    pixels: NDArray[np.integer],
+    *,
+    chunk: int = DEFAULT_CHUNK,
+    optics: str = "exact",
+    clip: Clip | None = None,
+    surfaces: Surface | Sequence[Surface] = (),
+) -> NDArray[np.float32]:
+    """The pixels ``pixels`` (row * width + column, row 0 at the top) of
+    :func:`render_reference`'s image, exactly as it renders them: (len(pixels), 4)
+    float32 premultiplied RGBA. What a GPU frame that checks itself traces again where its
+    walk went wrong (:mod:`tetvr.gl.selfcheck`); its cost is one pass over the tets' boxes
+    per pixel.
+
+    Examples
+    --------
+    >>> mesh = TetMesh.from_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 1, 2, 3]], [0, 0, 0, 0])
+    >>> tf = TransferFunction(color=((0, 1, 0, 0), (1, 1, 0, 0)), opacity=((0, 0.5), (1, 0.5)), unit_distance=0.6)
+    >>> cam = Camera(position=(0.2, 0.2, 5), focal_point=(0.2, 0.2, 0), parallel_projection=True, parallel_scale=0.5)
+    >>> full = render_reference(mesh, cam, tf, (8, 8))
+    >>> some = render_reference_pixels(mesh, cam, tf, (8, 8), [0, 27, 36])
+    >>> bool(np.array_equal(some, full.reshape(-1, 4)[[0, 27, 36]]))
+    True
+    """
+    width, height = _validate(mesh, camera, size)
+    chunk = _check_chunk(chunk)
+    pixels = np.asarray(pixels, dtype=np.int64).reshape(-1)
+    if pixels.size and (pixels.min() < 0 or pixels.max() >= width * height):
+        raise ValueError(f"pixels must lie in the {width}x{height} image, got {int(pixels.min())}..{int(pixels.max())}")
+    clip, surfaces = check_clip(clip), check_surfaces(surfaces)
+    camera = resolve_clipping_range(camera, union_bounds(mesh.bounds, *(s.points for s in surfaces)))
+    rays, hit_t, hit_rgb = _window(EyeRays.from_camera(camera, width, height), camera, clip, surfaces)
+    unique, back = np.unique(pixels, return_inverse=True)
+    norms = rays.norms()
+    parts = []
+    for seg in _pixel_segments(_tet_geometry(mesh, camera, rays), rays, unique, chunk):
+        rgb, theta = integrate_segments(seg.scalar_in, seg.scalar_out, (seg.t_out - seg.t_in) * norms[seg.pixel], tf,
+                                        optics=optics)
+        parts.append((np.searchsorted(unique, seg.pixel), seg.t_in, rgb, theta))
+    out = np.zeros((unique.size, 4))
+    if parts:
+        out = composite(*(np.concatenate(cols) for cols in zip(*parts)), unique.size).reshape(-1, 4)
+    if hit_t is not None and hit_rgb is not None:
+        hit = np.isfinite(hit_t.reshape(-1)[unique])
+        behind = np.concatenate([hit_rgb.reshape(-1, 3)[unique], hit[:, None].astype(np.float64)], axis=-1)
+        out = out + (1.0 - out[:, 3:4]) * behind
+    return out[back].astype(np.float32)
 
 
 def _window(rays: EyeRays, camera: Camera, clip: Clip | None,

@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tetvr.core.checks import check_instances
-from tetvr.core.camera import Camera
+from tetvr.core.camera import Camera, resolve_clipping_range
 from tetvr.core.image import check_memory, image_size
 from tetvr.optics.table import check_table_size, check_unit_distance
 from tetvr.reference.integrate import composite, integrate_segments
@@ -346,7 +346,7 @@ def _ray_intervals(volume: Volume, camera: Camera, width: int, height: int, *, c
     d_idx = d @ m[:3, :3].T
     hi = np.asarray(volume.dims, dtype=np.float64) - 1.0
     t0, t1 = _slab(o_idx, d_idx, np.zeros(3), hi)
-    near, far = camera.clipping_range
+    near, far = resolve_clipping_range(camera, volume.bounds).near_far()
     t0 = np.maximum(t0, near)
     t1 = np.minimum(t1, far)
     if clip_box is not None:

@@ -9,6 +9,8 @@ ParaView's "Save State" writes its server-manager state as XML::
       <Proxy group="representations" type="UnstructuredGridRepresentation" id="..">
           Input, Representation ("Volume"), ColorArrayName, LookupTable,
           ScalarOpacityFunction, ScalarOpacityUnitDistance, SelectMapper, Visibility
+      <Proxy group="representations" type="GeometryRepresentation" id="..">
+          Input (a SphereSource, ...), Representation ("Surface", "Outline"), DiffuseColor, ...
       <Proxy group="lookup_tables" type="PVLookupTable" id="..">    RGBPoints, ColorSpace,
           Discretize, NumberOfTableValues, UseLogScale, NanColor, Above/BelowRangeColor
       <Proxy group="piecewise_functions" type="PiecewiseFunction">  Points (x, a, midpoint, sharpness)
@@ -36,11 +38,14 @@ How each part maps (docs/paraview.md has the user's view of it):
 * **Opacity map** -- ``Points`` with their midpoint and sharpness (non-linear pieces are
   followed by linear ones), in log scale when the function says so; the representation's
   ``ScalarOpacityUnitDistance`` is the unit distance.
-* **Not carried over**: filters between the reader and the representation (the state is
-  refused, naming them), ``NanColor`` (tetvr refuses NaN scalars when it reads a mesh, so
-  there is nothing to colour), ``HSVWrap``, gradient backgrounds (the first colour is
-  used), lights, scalar bars and annotations; only one representation (the visible
-  volume, else the first visible one) is rendered.
+* **Other sources** in the view (a sphere, a box, a surface file, outlines) -- drawn as
+  opaque :class:`~tetvr.Surface` s beside the volume (:mod:`tetvr.scene.pvsources`); each
+  one tetvr cannot draw is warned about by name.
+* **Not carried over**: filters between the reader and the volume's representation (the
+  state is refused, naming them), ``NanColor`` (tetvr refuses NaN scalars when it reads a
+  mesh, so there is nothing to colour), ``HSVWrap``, gradient backgrounds (the first colour
+  is used), lights, scalar bars and annotations; one representation (the visible volume,
+  else the first visible one) is rendered as the volume.
 
 Examples
 --------
@@ -60,13 +65,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from tetvr.core.checks import check_input_file, warn
-from tetvr.core.camera import Camera, reset_clipping_range
+from tetvr.core.camera import Camera, reset_clipping_range, union_bounds
 from tetvr.optics.table import check_unit_distance
 from tetvr.optics.transfer import paraview_unit_distance
 from tetvr.scene.pvsm import (MAX_COMPONENT, MAX_TABLE_VALUES, MAX_VIEW_SIZE, OPACITY_COLUMNS, RGB_COLUMNS, StateProxy,
                               node_rows, parse_state)
+from tetvr.scene.pvsources import ShownSource, shown_sources, state_surfaces
 
 if TYPE_CHECKING:
+    from tetvr.core.surface import Surface
     from tetvr.mesh.tetmesh import TetMesh
     from tetvr.scene.scene import Scene
     from tetvr.optics.transfer import TransferFunction
@@ -115,6 +122,8 @@ class ParaViewState:
     above_range_color: tuple[float, float, float] | None = None
     below_range_color: tuple[float, float, float] | None = None
     view_time: float | None = None
+    #: The view's other visible representations (:func:`tetvr.scene.pvsources.shown_sources`).
+    others: tuple[ShownSource, ...] = ()
 
 
 def read_state(path: str | os.PathLike[str]) -> ParaViewState:
@@ -132,6 +141,7 @@ def read_state(path: str | os.PathLike[str]) -> ParaViewState:
     version, proxies = parse_state(path)
     rep, src, files = _rendered(proxies, path)
     view = _render_view(proxies, rep, path)
+    others = shown_sources(proxies, rep, view)
     view_time = view.number("ViewTime")
     times = src.floats("TimestepValues") or []  # every number is checked as it is read (StateProxy)
     data_file = files[0]
@@ -185,7 +195,7 @@ def read_state(path: str | os.PathLike[str]) -> ParaViewState:
         nan_color=tuple(lut.floats("NanColor", 3, lo=0.0, hi=1.0) or (1.0, 1.0, 0.0)),  # type: ignore[arg-type]
         above_range_color=colour("AboveRangeColor", "UseAboveRangeColor"),
         below_range_color=colour("BelowRangeColor", "UseBelowRangeColor"),
-        view_time=view_time,
+        view_time=view_time, others=others,
     )
 
 
@@ -406,7 +416,8 @@ def load_state(
     data_directory : where to look for the data file when the path the state names does
         not exist here (ParaView writes absolute paths); the state's own folder is tried first.
     parity : render with :data:`tetvr.settings.PARITY_SETTINGS` (ParaView's "Projected
-        tetra" picture) instead of tetvr's exact default.
+        tetra" picture) instead of tetvr's exact default. Parity draws the volume alone:
+        the state's other sources are left out, with a warning naming them.
     size : (width, height); default the state's view size.
 
     Examples
@@ -432,7 +443,6 @@ def load_state(
     tf = state_transfer_function(state)
     if state.unit_distance is None:
         tf = dataclasses.replace(tf, unit_distance=paraview_unit_distance(mesh.bounds, mesh.n_tets))
-    camera = reset_clipping_range(state.camera, mesh.bounds)
     if parity:
         from tetvr.settings import PARITY_SETTINGS
 
@@ -440,8 +450,30 @@ def load_state(
     else:
         settings = RenderSettings()
     out_size = image_size(size) if size is not None else (state.view_size or (512, 512))
+    surfaces = _other_sources(state, out_size, data_directory, parity)
+    # ParaView's range holds every visible prop.
+    camera = reset_clipping_range(state.camera, union_bounds(mesh.bounds, *(s.points for s in surfaces)))
     return Scene(mesh_path=mesh_path, mesh=mesh, tf=tf, camera=camera, size=out_size, background=state.background,
-                 settings=settings, scalars=mesh.scalar_name, component=state.component)
+                 settings=settings, scalars=mesh.scalar_name, component=state.component, surfaces=surfaces)
+
+
+def _other_sources(state: ParaViewState, size: tuple[int, int],
+                   data_directory: str | os.PathLike[str] | None, parity: bool) -> tuple["Surface", ...]:
+    """The surfaces of the state's other sources; each one not drawn is warned about."""
+    from tetvr.io.meshfile import read_cells
+
+    if not state.others:
+        return ()
+    if parity:
+        names = ", ".join(f"{s.name} ({s.representation})" for s in state.others)
+        warn(f"{state.path}: VTK parity draws the volume alone; left out: {names}", UserWarning)
+        return ()
+    surfaces, said = state_surfaces(state.others, camera=state.camera, size=size,
+                                    find=lambda name: _find_data(name, state.path, data_directory),
+                                    read_cells=read_cells)
+    for sentence in said:
+        warn(f"{state.path}: {sentence}", UserWarning)
+    return tuple(surfaces)
 
 
 def _read_mesh(mesh_path: str, state: ParaViewState, read: Any) -> "TetMesh":

@@ -40,6 +40,7 @@ class StateProxy:
         self.group = elem.get("group", "")
         self.type = elem.get("type", "")
         self.id = elem.get("id", "")
+        self.name = ""  # its name in ParaView's pipeline browser (the state's ProxyCollection), if any
         self.props = {p.get("name", ""): p for p in elem.findall("Property")}
 
     def where(self, name: str) -> str:
@@ -147,7 +148,13 @@ def parse_state(path: str) -> tuple[str, dict[str, StateProxy]]:
     if sms is None:
         raise ValueError(f"{path}: not a ParaView state file (no <ServerManagerState>, root is <{root.tag}>)")
     version = sms.get("version", "")
-    return version, {p.id: p for p in (StateProxy(e, path) for e in sms.findall("Proxy"))}
+    proxies = {p.id: p for p in (StateProxy(e, path) for e in sms.findall("Proxy"))}
+    for collection in sms.findall("ProxyCollection"):
+        for item in collection.findall("Item"):
+            proxy = proxies.get(item.get("id", ""))
+            if proxy is not None and not proxy.name:
+                proxy.name = item.get("name", "")
+    return version, proxies
 
 
 #: The columns of a colour map's and an opacity function's nodes, with their ranges.

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from tetvr.core.camera import Camera, reset_clipping_range
+from tetvr.core.checks import warn
 from tetvr.core.image import DEFAULT_BACKGROUND, atomic_output, image_size
 from tetvr.core.outputs import check_outputs, check_writable
 from tetvr.mesh.tetmesh import TetMesh
@@ -84,6 +85,10 @@ class Scene:
     #: Opaque surfaces inside the mesh, and the files they were read from.
     surfaces: tuple[Surface, ...] = ()
     surface_specs: tuple[dict[str, Any], ...] = ()
+    #: The ``Camera.fit`` options of a fitted camera (``"camera": {"fit": {...}}``), None for
+    #: an explicit one: a picture with another shape (a legend beside the render, an outline
+    #: to keep in view) fits it again (:func:`tetvr.apps.annotate.frame`).
+    camera_fit: dict[str, Any] | None = None
 
     @property
     def render_options(self) -> dict[str, Any]:
@@ -125,7 +130,9 @@ class Scene:
         mesh = read(path, scalars, component=component)
         tf_spec = data.get("transfer_function", {"preset": "viridis"})
         tf = _transfer_function(tf_spec, mesh, settings)
-        camera = _camera(data.get("camera", {"fit": {}}), mesh)
+        camera_spec = data.get("camera", {"fit": {}})
+        camera = _camera(camera_spec, mesh)
+        camera_fit = dict(camera_spec["fit"]) if "fit" in camera_spec else None  # _camera checked it
         defaulted = isinstance(tf_spec, dict) and "preset" in tf_spec and tf_spec.get("unit_distance") is None \
             and settings.optics != "vtk"
         return cls(mesh_path=str(path), mesh=mesh, tf=tf, camera=camera, size=size,  # type: ignore[arg-type]
@@ -133,7 +140,7 @@ class Scene:
                    unit_distance_default=defaulted, clip=clip,
                    surfaces=tuple(Surface.read(sp["path"], **{k: v for k, v in sp.items() if k != "path"})
                                   for sp in specs),
-                   surface_specs=specs)
+                   surface_specs=specs, camera_fit=camera_fit)
 
     def to_dict(self, relative_to: str | os.PathLike[str] | None = None) -> dict[str, Any]:
         mesh_path = self.mesh_path if relative_to is None else os.path.relpath(self.mesh_path, relative_to)
@@ -164,6 +171,10 @@ class Scene:
         text = json.dumps(self.to_dict(relative_to=Path(path).resolve().parent), indent=2)
         with atomic_output(path) as f:
             f.write(text.encode("utf-8"))
+        unsaved = len(self.surfaces) - len(self.surface_specs)
+        if unsaved > 0:  # a ParaView state's sphere, box or outline: made in memory, read from no file
+            warn(f"{os.fspath(path)}: {unsaved} of the scene's surfaces came from no file (a ParaView state's "
+                 "spheres, boxes, outlines) and are not in the saved scene, which names surface files")
 
 
 def _surface_specs(value: Any, base_dir: str | os.PathLike[str]) -> tuple[dict[str, Any], ...]:

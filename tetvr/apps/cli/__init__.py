@@ -1,4 +1,5 @@
-"""Command line: ``tetvr render mesh.vtu --scalars T -o out.png`` (or a scene JSON), ``tetvr demo``,
+"""Command line: ``tetvr render mesh.vtu --scalars T -o out.png`` (or a CT/MR volume, a scene
+JSON, ``mesh.vtu --volume ct.nhdr``; tuning options: :mod:`tetvr.apps.cli.tuning`), ``tetvr demo``,
 ``tetvr info mesh``, ``tetvr --version``,
 ``tetvr animate scene.json --orbit 36 -o frames/``, ``tetvr view scene.json``.
 
@@ -36,8 +37,10 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+from typing import Any
 
 from tetvr.apps.cli.commands import _COMMANDS
+from tetvr.apps.cli.tuning import RangeAction, finite_arg, positive_arg, unit_distance_arg, view_arg
 from tetvr.apps.cli.errors import (EXIT_ENVIRONMENT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_MEMORY, EXIT_OK, EXIT_USAGE,
                                    _classify, _fail, _show_warning, _UsageError)
 
@@ -99,24 +102,36 @@ def _colour_arg(text: str) -> tuple[float, float, float]:
                                          "matplotlib colour name") from None
 
 
-def _parser() -> argparse.ArgumentParser:
-    from tetvr import __version__
-
-    parser = _Parser(prog="tetvr", description="Volume rendering of tetrahedral meshes.", epilog=_EPILOG)
-    parser.add_argument("--version", action="version", version=f"tetvr {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True)
-    p_render = sub.add_parser("render", help="render a mesh file (or .pvd, .vtm, .pvtu) or a scene JSON to a PNG "
-                              "with a legend", epilog=_EPILOG)
-    p_render.add_argument("scene", metavar="mesh_or_scene",
-                          help="a mesh file (VTU, VTK, Gmsh, Exodus, ...), a ParaView collection, or a scene JSON "
-                          "(see the README)")
+def _add_render(sub: Any) -> None:
+    """The ``render`` command's arguments (the tuning options: :mod:`tetvr.apps.cli.tuning`)."""
+    p_render = sub.add_parser("render", help="render a mesh file (or .pvd, .vtm, .pvtu), a CT/MR volume or a scene "
+                              "JSON to a PNG with a legend", epilog=_EPILOG)
+    p_render.add_argument("scene", metavar="input",
+                          help="a mesh file (VTU, VTK, Gmsh, Exodus, ...), a ParaView collection, a volume (NRRD, "
+                          "MetaImage, VTI, NIfTI, DICOM folder), a scene JSON (see the README) or a ParaView state")
     p_render.add_argument("-o", "--output", default="out.png", help="PNG to write (default: out.png); for a .pvd "
                           "of several time steps a pattern with {time} or {index}, e.g. frame_{time}.png")
-    p_render.add_argument("--scalars", help="the field to render (a mesh file; default: its first field)")
+    p_render.add_argument("--scalars", help="the field to render (a mesh file; default: its first field that varies)")
     p_render.add_argument("--component", type=int, help="a vector field's component (default: its magnitude)")
     p_render.add_argument("--cmap", help="colour map: viridis, cool-to-warm, grayscale, hot, or any matplotlib "
-                          "colormap name such as magma (a mesh file; default: viridis)")
-    p_render.add_argument("--size", type=_size_arg, metavar="WxH", help="image size (default: 800x600, or the scene's)")
+                          "colormap name such as magma (a mesh or volume file; default: viridis)")
+    p_render.add_argument("--range", type=finite_arg, nargs=2, action=RangeAction, metavar=("LO", "HI"),
+                          help="colour and opacity range (default: the field's 1st..99.5th percentile)")
+    p_render.add_argument("--opacity-scale", type=positive_arg, metavar="S",
+                          help="multiply every opacity by S (capped at 1)")
+    p_render.add_argument("--unit-distance", type=unit_distance_arg, metavar="U",
+                          help="length (world units) over which the opacity is reached (default: diagonal / 20)")
+    p_render.add_argument("--volume", metavar="FILE", help="a CT/MR volume to fuse with the mesh (tetvr.fuse; "
+                          "the volume in grayscale by the default rule)")
+    p_render.add_argument("--view", type=view_arg, metavar="DIR",
+                          help="look along +x, -x, +y, -y, +z, -z or DX,DY,DZ (refits the camera)")
+    p_render.add_argument("--azimuth", type=finite_arg, metavar="DEG", help="turn the camera about its view up")
+    p_render.add_argument("--elevation", type=finite_arg, metavar="DEG", help="then turn it up about its right axis")
+    p_render.add_argument("--zoom", type=positive_arg, metavar="Z", help="magnify by Z")
+    p_render.add_argument("--parallel", action="store_true", help="parallel projection (refits the camera)")
+    p_render.add_argument("--parity", action="store_true",
+                          help="a ParaView state: ParaView's 'Projected tetra' picture (load_state(parity=True))")
+    p_render.add_argument("--size", type=_size_arg, metavar="WxH", help="the PNG's size, legend and title included (default: 800x600, or the scene's)")
     p_render.add_argument("--background", type=_colour_arg, metavar="COLOUR",
                           help="white (default), black, #rrggbb, r,g,b in [0, 1] or a matplotlib colour name")
     p_render.add_argument("--title", help="a title above the picture")
@@ -127,12 +142,21 @@ def _parser() -> argparse.ArgumentParser:
                           "if missing)")
     p_render.add_argument("--reference", action="store_true", help="use the exact CPU reference renderer")
     p_render.add_argument("--clip-box", type=float, nargs=6, metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"),
-                          help="keep only the part of the mesh inside this box (world units)")
+                          help="keep only the part of the mesh or volume inside this box (world units)")
     p_render.add_argument("--clip-plane", type=float, nargs=6, action="append",
                           metavar=("OX", "OY", "OZ", "NX", "NY", "NZ"),
                           help="keep only the side of the plane through O that N points into (repeatable)")
     p_render.add_argument("--surface", action="append", metavar="FILE",
                           help="an opaque surface (STL, OBJ, PLY, VTK, ...) drawn inside the volume (repeatable)")
+
+
+def _parser() -> argparse.ArgumentParser:
+    from tetvr import __version__
+
+    parser = _Parser(prog="tetvr", description="Volume rendering of tetrahedral meshes.", epilog=_EPILOG)
+    parser.add_argument("--version", action="version", version=f"tetvr {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_render(sub)
     p_demo = sub.add_parser("demo", help="render the bundled demo scene", epilog=_EPILOG)
     p_demo.add_argument("-o", "--output", default="demo.png", help="PNG to write (default: ./demo.png)")
     p_fusion = sub.add_parser("fusion-demo", help="render the bundled vessel-flow fusion demo in every mode",
@@ -172,6 +196,21 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _joined_views(argv: list[str]) -> list[str]:
+    """``--view -x`` as ``--view=-x``: argparse would take ``-x`` for an option.
+
+    >>> _joined_views(["render", "m.vtu", "--view", "-x", "--view", "+y"])
+    ['render', 'm.vtu', '--view=-x', '--view', '+y']
+    """
+    out: list[str] = []
+    for arg in argv:
+        if out and out[-1] == "--view" and re.fullmatch(r"-([xyzXYZ]|[\d.].*)", arg):
+            out[-1] = f"--view={arg}"
+        else:
+            out.append(arg)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status (see the module notes)."""
     import warnings
@@ -185,7 +224,7 @@ def _main(argv: list[str] | None) -> int:
     try:
         parser = _parser()
         try:
-            args = parser.parse_args(argv)
+            args = parser.parse_args(_joined_views(sys.argv[1:] if argv is None else list(argv)))
         except SystemExit as exc:  # --help
             return exc.code if isinstance(exc.code, int) else EXIT_OK
         return _COMMANDS[args.command](args)

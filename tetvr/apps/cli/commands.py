@@ -6,6 +6,7 @@ imported by the command that needs them, so ``tetvr --help`` stays quick."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import re
 import sys
@@ -39,18 +40,21 @@ def _is_scene(path: str) -> bool:
 
 
 def _write_picture(image: Any, out: str, *, tf: Any, mesh: Any, camera: Any, background: Any,
-                   annotate: bool, title: str | None, units: str | None) -> str:
+                   annotate: bool, title: str | None, units: str | None, size: tuple[int, int] | None = None) -> str:
     """The PNG: annotated (legend, triad, outline) unless asked not to or matplotlib is
-    missing (then the plain image, with a note); returns what was written."""
+    missing (then the plain image, with a note); returns what was written. ``mesh`` is
+    what the legend and the outline describe: a mesh or a volume (its field and bounds).
+    ``size``: the picture's, the image being the render area :func:`_render_area` gives."""
     from tetvr.core.image import atomic_output, png_bytes
 
     data = None
     if annotate:
         try:
-            from tetvr.apps.annotate import annotate as annotate_png
+            from tetvr.apps.annotate import annotate as annotate_png, mesh_labels
 
-            data = annotate_png(image, tf, field=mesh.scalar_name, units=units, title=title, camera=camera,
-                                bounds=mesh.bounds, background=background)
+            data = annotate_png(image, tf, units=units, title=title, camera=camera, background=background,
+                                size=size,
+                                **mesh_labels(mesh))
         except ImportError:
             print("tetvr: note: the picture has no legend: matplotlib is not installed (pip install 'tetvr[plot]')",
                   file=sys.stderr)
@@ -62,42 +66,104 @@ def _write_picture(image: Any, out: str, *, tf: Any, mesh: Any, camera: Any, bac
     return what
 
 
+#: The ``render`` options other commands leave out (``demo`` renders through ``_render``).
+_RENDER_DEFAULTS: dict[str, Any] = dict(
+    npy=None, reference=False, scalars=None, component=None, cmap=None, size=None, background=None, title=None,
+    units=None, no_annotations=False, range=None, opacity_scale=None, unit_distance=None, volume=None, view=None,
+    azimuth=None, elevation=None, zoom=None, parallel=False, parity=False)
+
+
+def _render_area(args: argparse.Namespace, tf: Any, data: Any, size: tuple[int, int]) -> tuple[int, int]:
+    """The render's size inside a picture of ``size`` (``--size``: the size of the file):
+    what the legend and the title leave, all of it for a plain picture."""
+    if args.no_annotations:
+        return size
+    try:
+        from tetvr.apps.annotate import mesh_labels, render_area
+
+        return render_area(size, tf, field=mesh_labels(data)["field"], units=args.units, title=args.title)
+    except ImportError:
+        return size  # no matplotlib: the plain picture (_write_picture says so)
+
+
+def _framed(data: Any, args: argparse.Namespace) -> Any:
+    """What the camera frames: the data and the outline drawn around it."""
+    from tetvr.apps.annotate import Framed
+
+    return Framed(data, outline=not args.no_annotations)
+
+
+def _input_kind(path: str) -> str:
+    """``"state"`` (a ParaView state), ``"scene"`` (a scene JSON), ``"volume"`` or ``"mesh"``."""
+    if _is_scene(path):
+        return "state" if path.lower().endswith(".pvsm") else "scene"
+    return "volume" if _is_volume(path) else "mesh"
+
+
 def _render(args: argparse.Namespace) -> int:
-    """A mesh file (default scene: fitted camera, the data-driven transfer function) or a
-    scene JSON; a ``.pvd`` (named by either) renders every time step, one file each."""
-    from tetvr.core.camera import _fit
+    """A mesh file (default scene: fitted camera, the data-driven transfer function), a
+    volume (the same defaults), a mesh fused with a volume (``--volume``), or a scene JSON
+    or ParaView state; a ``.pvd`` (named by either) renders every time step, one file each."""
+    from tetvr.apps.cli.tuning import check_options
+
+    args = argparse.Namespace(**{**_RENDER_DEFAULTS, **vars(args)})
+    kind = _input_kind(args.scene)
+    check_options(args, kind)
+    if kind == "volume" or args.volume:
+        return _render_one(args, kind)
+    return _render_scene(args, kind)
+
+
+def _load_scene(args: argparse.Namespace, kind: str) -> tuple[Any, list[tuple[str, str]]]:
+    """The scene to render and the command's inputs so far: a scene file with the camera
+    options applied, or a mesh file's default scene with the tuning options."""
+    from tetvr.apps.cli.tuning import data_camera, data_tf, scene_camera
+    from tetvr.io.collections import is_collection
+    from tetvr.scene.scene import Scene
+
+    if kind in ("scene", "state"):
+        from tetvr.scene.load import load_scene
+        from tetvr.scene.paraview import load_state
+
+        for path, label in [(args.output, "PNG")] + ([(args.npy, "--npy array")] if args.npy else []):
+            if "{" not in path:
+                check_writable(path, label)
+        scene = load_state(args.scene, parity=True) if args.parity else load_scene(args.scene)
+        area = _render_area(args, scene.tf, scene.mesh, args.size or scene.size)
+        if scene.camera_fit is not None:  # fitted again to the render's shape, the outline in view
+            from tetvr.apps.annotate import frame
+
+            scene = dataclasses.replace(scene, camera=frame(scene.mesh, area, outline=not args.no_annotations,
+                                                            **scene.camera_fit))
+        camera = scene_camera(scene.camera, _framed(scene.mesh, args), args, area)
+        return dataclasses.replace(scene, camera=camera), _scene_inputs(args.scene, scene)
+    from tetvr.io.meshfile import read
+
+    inputs = [("mesh file", args.scene)]
+    if "{" not in args.output and not is_collection(args.scene):
+        check_writable(args.output, "PNG")
+        check_outputs([("PNG", args.output)], inputs)
+    mesh = read(args.scene, args.scalars, component=args.component)
+    size = args.size or (800, 600)
+    tf = data_tf(mesh, args)
+    camera = data_camera(_framed(mesh, args), args, _render_area(args, tf, mesh, size))
+    scene = Scene(mesh_path=args.scene, mesh=mesh, tf=tf, camera=camera,
+                  size=size, scalars=mesh.scalar_name, component=args.component)
+    return scene, inputs
+
+
+def _render_scene(args: argparse.Namespace, kind: str) -> int:
+    """A mesh file or a scene, every time step of a ``.pvd``."""
     from tetvr.io.collections import is_collection, leaf_files, quiet_first_step, read_pvd
     from tetvr.io.series import read_step
-    from tetvr.core.image import atomic_output
-    from tetvr.render import default_transfer_function, render
-    from tetvr.scene.scene import Scene
-    from tetvr.scene.load import load_scene
+    from tetvr.render import render
 
     method = "reference" if args.reference else "gpu"
     t0 = time.perf_counter()
     with quiet_first_step():  # a .pvd's steps are all rendered here
-        if _is_scene(args.scene):
-            for flag, value in (("--scalars", args.scalars), ("--cmap", args.cmap), ("--component", args.component)):
-                if value is not None:
-                    raise ValueError(f"{flag} is for a mesh file; a scene sets it in its JSON ({args.scene!r})")
-            for path, label in [(args.output, "PNG")] + ([(args.npy, "--npy array")] if args.npy else []):
-                if "{" not in path:
-                    check_writable(path, label)
-            scene = load_scene(args.scene)
-            inputs = _scene_inputs(args.scene, scene)
-        else:
-            from tetvr.io.meshfile import read
-
-            inputs = [("mesh file", args.scene)]
-            if "{" not in args.output and not is_collection(args.scene):
-                check_writable(args.output, "PNG")
-                check_outputs([("PNG", args.output)], inputs)
-            mesh = read(args.scene, args.scalars, component=args.component)
-            size = args.size or (800, 600)
-            scene = Scene(mesh_path=args.scene, mesh=mesh, tf=default_transfer_function(mesh, preset=args.cmap or "viridis"),
-                          camera=_fit(mesh, aspect=size[0] / size[1]), size=size,
-                          scalars=mesh.scalar_name, component=args.component)
+        scene, inputs = _load_scene(args, kind)
     size = args.size or scene.size
+    _check_picture_memory(args, size)
     background = args.background or scene.background
     options = _clip_and_surfaces(args, scene)
     inputs += [("surface file", p) for p in getattr(args, "surface", None) or ()]
@@ -114,28 +180,97 @@ def _render(args: argparse.Namespace) -> int:
         npy = (_npy_path(_step_name(args.npy, "--npy array", i, t, n) if t is not None else args.npy)
                if args.npy else None)
         jobs.append((i, t, png, npy))
-    outputs = [("PNG", png) for _, _, png, _ in jobs] + [("--npy array", npy) for _, _, _, npy in jobs if npy]
-    for label, path in outputs:
-        check_writable(path, label)
-    check_outputs(outputs, inputs)
+    _check_outputs_of(jobs, inputs)
     t1 = time.perf_counter()
     for i, t, png, npy in jobs:
         ts = time.perf_counter()
         mesh = scene.mesh if i == 0 or coll is None else read_step(coll, i, scene.scalars, component=scene.component)
-        image = render(mesh, camera=scene.camera, tf=scene.tf, size=size, settings=scene.settings, method=method,
-                       **options)
+        image = render(mesh, camera=scene.camera, tf=scene.tf, size=_render_area(args, scene.tf, mesh, size),
+                       settings=scene.settings, method=method, **options)
         t2 = time.perf_counter()
-        what = _write_picture(image, png, tf=scene.tf, mesh=mesh, camera=scene.camera, background=background,
-                              annotate=not args.no_annotations, units=args.units,
-                              title=args.title if t is None or not args.title else f"{args.title} (t = {t:g})")
-        if npy:
-            with atomic_output(npy) as f:
-                np.save(f, image)
         step = f"step {i} (t = {t:g}): " if t is not None else ""
-        print(f"{step}{mesh.n_tets} tets, field {mesh.scalar_name!r}, {size[0]}x{size[1]} px, {method}: "
-              f"read {(t1 - t0) if i == 0 else (ts - t1):.2f} s, render {t2 - ts:.2f} s -> {what} {png}"
-              + (f" and {npy}" if npy else ""), file=_report_stream(png, npy))
+        _finish(image, args, png, npy, tf=scene.tf, data=mesh, camera=scene.camera, background=background, size=size,
+                title=args.title if t is None or not args.title else f"{args.title} (t = {t:g})",
+                report=f"{step}{mesh.n_tets} tets, field {mesh.scalar_name!r}, {size[0]}x{size[1]} px, {method}: "
+                       f"read {(t1 - t0) if i == 0 else (ts - t1):.2f} s, render {t2 - ts:.2f} s")
         t1 = time.perf_counter()
+    return EXIT_OK
+
+
+def _check_picture_memory(args: argparse.Namespace, size: tuple[int, int]) -> None:
+    """The picture's memory (the legend's canvas, the PNG) checked before any frame is rendered."""
+    from tetvr.gl.framesize import check_picture
+
+    check_picture(size, "png" if args.no_annotations else "annotate")
+
+
+def _check_outputs_of(jobs: list[tuple[Any, Any, str, str | None]], inputs: list[tuple[str, str]]) -> None:
+    outputs = [("PNG", png) for _, _, png, _ in jobs] + [("--npy array", npy) for _, _, _, npy in jobs if npy]
+    for label, path in outputs:
+        check_writable(path, label)
+    check_outputs(outputs, inputs)
+
+
+def _finish(image: Any, args: argparse.Namespace, png: str, npy: str | None, *, tf: Any, data: Any, camera: Any,
+            background: Any, title: str | None, report: str, size: tuple[int, int] | None = None) -> None:
+    """Write the picture (and the float array) and the report line."""
+    from tetvr.core.image import atomic_output
+
+    what = _write_picture(image, png, tf=tf, mesh=data, camera=camera, background=background,
+                          annotate=not args.no_annotations, units=args.units, title=title, size=size)
+    if npy:
+        with atomic_output(npy) as f:
+            np.save(f, image)
+    print(f"{report} -> {what} {png}" + (f" and {npy}" if npy else ""), file=_report_stream(png, npy))
+
+
+def _render_one(args: argparse.Namespace, kind: str) -> int:
+    """A volume file, or a mesh file fused with ``--volume``: one picture, the defaults of
+    both (a fused volume in grayscale), framed together."""
+    from tetvr.apps.cli.tuning import Together, data_camera, data_tf
+    from tetvr.core.image import DEFAULT_BACKGROUND
+    from tetvr.io.volume_file import read_volume
+    from tetvr.render import default_transfer_function, render
+
+    method = "reference" if args.reference else "gpu"
+    inputs = [("volume file", args.scene)] if kind == "volume" else [("mesh file", args.scene),
+                                                                      ("volume file", args.volume)]
+    npy = _npy_path(args.npy) if args.npy else None
+    _check_outputs_of([(0, None, args.output, npy)], inputs)
+    t0 = time.perf_counter()
+    size = args.size or (800, 600)
+    _check_picture_memory(args, size)
+    if kind == "volume":
+        data = volume = read_volume(args.scene)
+        framed: Any = volume
+    else:
+        from tetvr.io.meshfile import read
+
+        data = read(args.scene, args.scalars, component=args.component)
+        volume = read_volume(args.volume)
+        framed = Together.of([data, volume])
+    tf = data_tf(data, args)
+    area = _render_area(args, tf, data, size)
+    camera = data_camera(_framed(framed, args), args, area)
+    t1 = time.perf_counter()
+    if kind == "volume":
+        from tetvr.reference.volume import RaycastSettings
+
+        box = args.clip_box
+        settings = RaycastSettings(clip_box=(tuple(box[:3]), tuple(box[3:]))) if box else None
+        image = render(volume, camera=camera, tf=tf, size=area, settings=settings, method=method)
+        what = f"a {'x'.join(map(str, volume.dims))} volume"
+    else:
+        from tetvr.fuse import fuse, fuse_reference
+
+        volume_tf = default_transfer_function(volume, preset="grayscale")
+        image = (fuse_reference if args.reference else fuse)(data, volume, camera, tf, volume_tf, size=area)
+        what = f"{data.n_tets} tets in a {'x'.join(map(str, volume.dims))} volume"
+    t2 = time.perf_counter()
+    _finish(image, args, args.output, npy, tf=tf, data=data, camera=camera, size=size,
+            background=args.background or DEFAULT_BACKGROUND,
+            title=args.title, report=f"{what}, field {data.scalar_name!r}, {size[0]}x{size[1]} px, {method}: "
+                                     f"read {t1 - t0:.2f} s, render {t2 - t1:.2f} s")
     return EXIT_OK
 
 
@@ -323,6 +458,7 @@ def _info(args: argparse.Namespace) -> int:
               + (f", frame {vol.space}" if vol.space else ""))
         print(f"  bounds  {' '.join(f'{v:.4g}' for v in lo)} .. {' '.join(f'{v:.4g}' for v in hi)}")
         print(f"  field   {vol.scalar_name!r}: {_stats_line(vol.data.reshape(-1))}")
+        print(f"  default colour range {' .. '.join(f'{v:.4g}' for v in _default_range(vol))}")
         return EXIT_OK
     from tetvr.io import meshfile
     from tetvr.io.meshfile import read_cells
@@ -381,9 +517,7 @@ def _view(args: argparse.Namespace) -> int:
 def _demo(args: argparse.Namespace) -> int:
     from tetvr.scene.scene import demo_scene_path
 
-    return _render(argparse.Namespace(scene=str(demo_scene_path()), output=args.output, npy=None, reference=False,
-                                      scalars=None, component=None, cmap=None, size=None, background=None,
-                                      title=None, units=None, no_annotations=False))
+    return _render(argparse.Namespace(**{**_RENDER_DEFAULTS, "scene": str(demo_scene_path()), "output": args.output}))
 
 
 _COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
