@@ -101,9 +101,6 @@ uniform float u_tolerance;
 // across the ray, the ray is as close to them as to that edge; elsewhere the rasteriser
 // listed any face the ray enters beside it, and every ray's last exit would pay for the test.
 #define NEAR_EDGE 0.02
-// A face whose projection across the ray has less area than this fraction of its longest
-// edge squared is taken as seen edge-on (the ray in its plane, to a rounding).
-#define EDGE_ON_AREA 1.0e-4
 uniform int u_max_steps;      // bound on tets per ray and layer (a walk caught by rounding)
 // Most tets a ray walks by face planes before it walks by points (see main).
 #define PLANE_STEPS 8
@@ -406,6 +403,7 @@ void main() {
     if (by_points) {
         status = STATUS_DONE;
         ended = false;
+        bool astray = false;
         for (int step = 1; step < u_max_steps; ++step) {
             // Into the next tet by its face f: the slots there of the triangle's points.
             int f = link.x & 3;
@@ -438,25 +436,11 @@ void main() {
             float fa = cross2(pa, pn), fb = cross2(pb, pn), fc = cross2(pc, pn);
             float sa_ = side(fa, pa, pn), sb_ = side(fb, pb, pn), sc_ = side(fc, pc, pn);
             // Out by (b, c, n) if e(b, n) <= 0 < e(c, n); by (c, a, n) if e(c, n) <= 0 < e(a, n);
-            // else by (a, b, n): the point left behind, 0, 1 or 2 for a, b, c. The next
-            // triangle keeps the counter-clockwise turn.
-            int drop = sb_ <= 0.0 && sc_ > 0.0 ? 0 : (sc_ <= 0.0 && sa_ > 0.0 ? 1 : 2);
-            ivec3 slots = ivec3(sa, sb, sc);
-            k = slots[drop];  // the exit face: opposite the point left behind
-            link = tet_link(tet, k);
-            if (link.x < 0 && abs(dot(face_plane(tet, k).xyz, d)) <= GRAZING * per_t) {
-                // A boundary face the ray runs along (the eye in its plane): the ray lies on
-                // the mesh's closure there and goes on, as the reference has it. Seen across
-                // the ray the face is a segment through the origin, (x, y) the points it
-                // shares with the triangle, (y, x, n) on one line: the ray leaves it by the
-                // edge (x, n) or (n, y) about the origin, so by the face with that edge.
-                int x = (drop + 1) % 3, y = (drop + 2) % 3;
-                vec2 px_ = x == 0 ? pa : (x == 1 ? pb : pc), py_ = y == 0 ? pa : (y == 1 ? pb : pc);
-                drop = dot(pn, py_ - px_) > 0.0 ? y : x;
-                k = slots[drop];
-                link = tet_link(tet, k);
-            }
-            bool drop_a = drop == 0, drop_b = drop == 1;
+            // else by (a, b, n). The next triangle keeps the counter-clockwise turn. Where
+            // a point lies exactly on the ray's line, side() breaks the tie as the reference does.
+            bool drop_a = sb_ <= 0.0 && sc_ > 0.0;
+            bool drop_b = !drop_a && sc_ <= 0.0 && sa_ > 0.0;
+            k = drop_a ? sa : (drop_b ? sb : sc);  // the exit face: opposite the point left behind
             E = drop_a ? vec3(fc, -fb, E.x) : (drop_b ? vec3(fa, -fc, E.y) : vec3(fb, -fa, E.z));
             int s0 = drop_a ? sb : (drop_b ? sc : sa);
             int s1 = drop_a ? sc : (drop_b ? sa : sb);
@@ -475,30 +459,12 @@ void main() {
 #else
             s_out = sum > 0.0 ? dot(w, ss) / sum : s_in;
 #endif
-            vec2 u0 = p1 - p0, u1 = pn - p1, u2 = p0 - pn;
-            if (sum <= EDGE_ON_AREA * max(dot(u0, u0), max(dot(u1, u1), dot(u2, u2)))) {
-                // The exit face is seen (almost) edge-on: the ray runs in its plane, where
-                // the weights of its points are rounding and their point lies off the ray.
-                // The tet's other planes say where the ray leaves it, and its field the
-                // scalar there.
-                float t_exit = 3.0e38;
-                for (int j = 0; j < 4; ++j) {
-                    vec4 plane = face_plane(tet, j);
-                    float den = dot(plane.xyz, d);
-                    if (den > GRAZING * per_t) t_exit = min(t_exit, -(dot(plane.xyz, o) + plane.w) / den);
-                }
-                if (t_exit < 3.0e38) {
-                    t_w = t_exit;
-                    t_out = max(t_exit, t_in);
-#if !CELL_DATA
-                    vec4 gt = tet_scalar(tet);
-                    s_out = dot(gt.xyz, o + t_out * d) + gt.w;
-#endif
-                }
-            }
-            if ((t_in - t_w) * per_t > u_slack) suspect(px);  // the exit behind the entry: not this tet's
+            // The exit behind the entry: not this tet's (a face seen edge-on, whose points'
+            // weights are rounding, or a walk gone astray): traced again (tetvr.gl.selfcheck).
+            astray = astray || (t_in - t_w) * per_t > u_slack;
             ended = composite(acc, t_in, s_in, t_out, s_out, win, per_t);
             if (ended) break;
+            link = tet_link(tet, k);
             if (link.x < 0) {
                 ended = true;
                 status = STATUS_REENTER;
@@ -507,7 +473,7 @@ void main() {
                 break;
             }
         }
-        if (!ended) suspect(px);  // the step bound reached
+        if (astray || !ended) suspect(px);  // an exit behind its entry, or the step bound reached
         if (status == STATUS_REENTER) {
             // Out of the mesh by face k: where, by its plane, as the next entry pass finds
             // the faces it may enter by (march_entry.frag), so that a face that coincides

@@ -4,8 +4,8 @@ x, y and z), so an axis-aligned view of an axis-aligned mesh, the eye on its nod
 drawn within 1/255 of the reference at every pixel. Rays in the plane of a boundary face
 are in the mesh or out of it exactly where the reference has them; before the rule, whole
 columns of such pixels were drawn where the reference has nothing (and the reverse), 1.0 off.
-Rays within a rounding of an interior face's plane leave tets by faces seen edge-on, whose
-exits the walk takes from the tet's planes."""
+Rays within a rounding of an interior face's plane may leave tets by faces seen edge-on,
+whose exits lie behind their entries: the frame's check traces them again (tetvr.gl.selfcheck)."""
 
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ CASES = [(x, y, axis, parallel) for (x, y) in ((0.5, 0.0), (-0.5, 0.0), (0.5, 0.
          for axis in (0, 1) for parallel in (True, False)]
 # Perspective views whose diagonal pixel rays lie in the cells' diagonal (interior) planes
 # to a rounding: the walk leaves tets by faces seen edge-on, whose points' weights are
-# rounding (0.006 off on a pixel before the walk took such exits from the tet's planes).
+# rounding (0.006 off on a pixel before the frame's check traced such rays again).
 CASES += [(x, y, axis, False) for (x, y) in ((0.0, 0.0), (1 / 6, -1 / 6), (-1 / 6, -1 / 6), (1 / 6, 1 / 6))
           for axis in (0, 2)]
 
