@@ -1,6 +1,7 @@
 """Rendering on Dask: time series and sort-last bricks, measured against one process.
 
-Four parts, each written to ``<out>/distributed.json`` (and a chart, ``distributed.png``):
+Six parts, each written to ``<out>/distributed.json`` (and charts, ``distributed.png`` and
+``distributed_compositing.png``):
 
 * **series** -- S steps of a synthetic mesh written as ``.vtu`` files, each read and
   rendered (256x256): a plain serial loop in this process against
@@ -14,6 +15,14 @@ Four parts, each written to ``<out>/distributed.json`` (and a chart, ``distribut
   2-worker cluster (:func:`tetvr.cluster.distributed.distribute_mesh`): the split's time on the
   client, the first frame, the median time per view change (an orbit), and each worker's
   peak resident memory (``ru_maxrss``, a fresh cluster per P).
+* **compositing** -- P = 2, 4, 8, 16 images (512x512 and 1024x1024 float RGBA, and 8x8 for
+  Dask's cost per task) held by 2 workers in turn, composited on the client (all P
+  gathered, :func:`tetvr.cluster.bricks.composite_over`) and on the workers (radix-k,
+  :func:`tetvr.cluster.compositing.composite_on_workers`): time, the bytes the workers send
+  the client and each other (Dask's transfer logs), the difference between the two.
+* **frames** -- whole frames of a grid cube in P = 2 .. 16 k-d bricks on 2 workers
+  (:meth:`tetvr.cluster.distributed.ClusterBricks.render`, ``composite="client"`` and
+  ``"workers"``): the median time of a few views and the bytes the client receives.
 * **accuracy** -- the acceptance matrix: a grid cube, the interlocking rings (non-convex)
   and bluntfin (when ``../shared`` has it), P = 2, 4, 8, perspective / parallel / inside,
   both methods: the composite's max abs difference from the single-process image, and
@@ -21,14 +30,16 @@ Four parts, each written to ``<out>/distributed.json`` (and a chart, ``distribut
 
 Ratios carry between machines; seconds are this machine's (llvmpipe; ``machine`` in the
 JSON says how many cores). The projection to 64 / 1,024 workers and 10^9 tets in
-bench/README.md is computed from these numbers by ``bench/doc_tables.py``.
+bench/README.md, and the compositing model for P = 1,024 in docs/distributed.md, are
+computed from these numbers by ``bench/doc_tables.py``.
 
 (This file is named like the ``distributed`` package: it takes its own folder off
 ``sys.path`` before anything imports Dask.)
 
 Usage::
 
-    python bench/distributed.py [--quick] [--tets 1e6[,1e7]] [--rounds R] [--out bench/results]
+    python bench/distributed.py [--quick] [--tets 1e6[,1e7]] [--rounds R] [--only compositing,frames]
+                                [--out bench/results]
 """
 
 from __future__ import annotations
@@ -246,6 +257,177 @@ def accuracy(args: argparse.Namespace) -> dict:
     return out
 
 
+def _transfer_log(dask_worker=None) -> list:
+    """This worker's outgoing transfers (Dask's transfer log): (to whom, bytes)."""
+    return [(e.get("who"), int(e["total"])) for e in dask_worker.transfer_outgoing_log]
+
+
+def _moved(c, before: dict) -> tuple[int, int]:
+    """Bytes the workers sent since ``before`` (their logs then): to anything that is not a
+    worker (the client, or the scheduler on the client's behalf), and between workers."""
+    now = c.run(_transfer_log)
+    workers = set(now)
+    to_client = between = 0
+    for w, log in now.items():
+        for who, total in log[len(before.get(w, [])):]:
+            if who in workers:
+                between += total
+            else:
+                to_client += total
+    return to_client, between
+
+
+def _premultiplied(rng, h: int, w: int):
+    a = rng.random((h, w, 1), dtype=np.float32) * 0.6
+    return np.concatenate([rng.random((h, w, 3), dtype=np.float32) * a, a], axis=-1)
+
+
+def compositing(args: argparse.Namespace) -> dict:
+    """The P brick images composited on the client (all P gathered) and on the workers
+    (radix-k), from images already on the workers: time, bytes the client receives, bytes
+    between workers, tasks; Dask's cost per task from 8x8 images."""
+    from tetvr.cluster.bricks import composite_over
+    from tetvr.cluster.compositing import composite_on_workers, radix_factors, stitch
+    from tetvr.cluster.workers import cluster_client
+
+    ps = [int(x) for x in args.composite_p.split(",")]
+    sizes = [(8, 8), (256, 256), (512, 512)] if args.quick else [(8, 8), (512, 512), (1024, 1024)]
+    rng = np.random.default_rng(0)
+    out: dict = {"workers": 2, "P": ps, "cases": [],
+                 "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
+    with cluster_client(n_workers=2) as c:
+        c.wait_for_workers(2)
+        addrs = sorted(c.nthreads())
+        for w, h in sizes:
+            n = w * h
+            for p in ps:
+                where = [addrs[i % len(addrs)] for i in range(p)]  # bricks share the 2 workers
+                futs = [c.scatter(_premultiplied(rng, h, w), workers=[where[i]], direct=True, hash=False)
+                        for i in range(p)]
+                __import__("distributed").wait(futs)
+                runs: dict = {"client": [], "workers": []}
+                images = {}
+                for _ in range(args.rounds):
+                    for mode in ("client", "workers"):
+                        before = c.run(_transfer_log)
+                        t = time.perf_counter()
+                        if mode == "client":
+                            got = c.gather(futs)
+                            images[mode] = composite_over(got)
+                        else:
+                            pieces, regions = composite_on_workers(c, futs, n, workers=where)
+                            got = c.gather(pieces)
+                            images[mode] = stitch(got, regions, h, w)
+                        dt = time.perf_counter() - t
+                        received = sum(g.nbytes for g in got)
+                        del got
+                        to_client, between = _moved(c, before)
+                        runs[mode].append({"s": dt, "gathered_bytes": received, "workers_to_client_bytes": to_client,
+                                           "between_workers_bytes": between})
+                tasks = sum(p * (k + 1) for k in radix_factors(p)) if p > 1 else 1
+                case = {"size": [w, h], "P": p, "tasks": tasks, "factors": radix_factors(p),
+                        "image_bytes": 16 * n, "max_abs_diff": float(np.abs(images["workers"] - images["client"]).max())}
+                for mode, rs in runs.items():
+                    best = min(rs, key=lambda r: r["s"])
+                    case[mode] = {"best_s": best["s"], "runs_s": [r["s"] for r in rs], **{
+                        k: v for k, v in best.items() if k != "s"}}
+                out["cases"].append(case)
+                print(f"compositing {w}x{h} P={p}: client {case['client']['best_s']:.3f} s "
+                      f"({case['client']['workers_to_client_bytes'] / 2**20:.1f} MiB to the client), workers "
+                      f"{case['workers']['best_s']:.3f} s ({case['workers']['workers_to_client_bytes'] / 2**20:.1f} "
+                      f"MiB to the client, {case['workers']['between_workers_bytes'] / 2**20:.1f} MiB between "
+                      f"workers, {tasks} tasks), max diff {case['max_abs_diff']:.1e}", flush=True)
+                del futs
+    # Dask's cost per task: the 8x8 frames' time against their task counts (least squares).
+    tiny = [x for x in out["cases"] if x["size"] == [8, 8]]
+    slope, icpt = np.polyfit([x["tasks"] for x in tiny], [x["workers"]["best_s"] for x in tiny], 1)
+    # "Over" on one core: ns per pixel per image after the first (float32 in, float64 sums).
+    a, b = _premultiplied(rng, 1024, 1024), _premultiplied(rng, 1024, 1024)
+    over = min(_timed(lambda: composite_over([a, b, a, b, a])) for _ in range(3)) / (4 * 1024 * 1024)
+    out["constants"] = {"s_per_task": float(slope), "s_per_frame": float(icpt), "over_ns_per_pixel": over * 1e9}
+    print(f"compositing: Dask {slope * 1e3:.2f} ms per task (+{icpt * 1e3:.0f} ms a frame); over "
+          f"{over * 1e9:.1f} ns per pixel", flush=True)
+    return out
+
+
+def frames(args: argparse.Namespace) -> dict:
+    """Whole frames of a k-d split mesh (renders included), composited on the client and
+    on the workers, P = 2 .. 16 bricks on 2 workers: the median time of a few views and
+    the bytes the client receives."""
+    from tetvr import Camera, TransferFunction
+    from tetvr.apps.animate import orbit
+    from tetvr.cluster.distributed import distribute_mesh
+    from tetvr.cluster.workers import cluster_client
+    from tetvr.mesh import synthetic
+
+    mesh = synthetic.cube(8 if args.quick else 14)
+    size = (256, 256) if args.quick else (512, 512)
+    tf = TransferFunction.preset("viridis", mesh.scalar_range, opacity=0.5, unit_distance=0.2)
+    views = orbit(Camera.fit(mesh), 1 + args.views, degrees=40.0)
+    out: dict = {"n_tets": mesh.n_tets, "size": list(size), "workers": 2, "P": {}}
+    with cluster_client(n_workers=2) as c:
+        c.wait_for_workers(2)
+        for p in (int(x) for x in args.composite_p.split(",")):
+            b = distribute_mesh(mesh, p, c)
+            res: dict = {"client": [], "workers": [], "client_bytes": {}, "max_abs_diff": 0.0}
+            for mode in ("client", "workers"):
+                b.render(views[0], tf, size=size, composite=mode)  # warm-up
+            for cam in views[1:]:
+                got = {}
+                for mode in ("client", "workers"):
+                    before = c.run(_transfer_log)
+                    t = time.perf_counter()
+                    got[mode] = b.render(cam, tf, size=size, composite=mode)
+                    res[mode].append(time.perf_counter() - t)
+                    res["client_bytes"][mode] = _moved(c, before)[0]
+                res["max_abs_diff"] = max(res["max_abs_diff"], float(np.abs(got["client"] - got["workers"]).max()))
+            b.release()
+            res["median_s"] = {m: float(np.median(res[m])) for m in ("client", "workers")}
+            out["P"][str(p)] = res
+            print(f"frames P={p}: client {res['median_s']['client']:.2f} s, workers {res['median_s']['workers']:.2f} s; "
+                  f"client receives {res['client_bytes']['client'] / 2**20:.1f} / "
+                  f"{res['client_bytes']['workers'] / 2**20:.1f} MiB", flush=True)
+    return out
+
+
+def chart_compositing(result: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    r = result["compositing"]
+    big = max((x["size"][0] * x["size"][1] for x in r["cases"]))
+    cases = [x for x in r["cases"] if x["size"][0] * x["size"][1] == big]
+    ps = [x["P"] for x in cases]
+    fig, ax = plt.subplots(1, 3, figsize=(13, 3.8))
+    for mode, colour in (("client", "#888"), ("workers", "#2a9d8f")):
+        label = "all images to the client" if mode == "client" else "radix-k on the workers"
+        ax[0].plot(ps, [x[mode]["workers_to_client_bytes"] / 2**20 for x in cases], "o-", color=colour, label=label)
+        ax[1].plot(ps, [x[mode]["best_s"] for x in cases], "o-", color=colour, label=label)
+        if "frames" in result:
+            f = result["frames"]["P"]
+            fp = sorted(f, key=int)
+            ax[2].plot([int(p) for p in fp], [f[p]["median_s"][mode] for p in fp], "o-", color=colour, label=label)
+    w, h = cases[0]["size"]
+    ax[0].set_title(f"client receives ({w}x{h} float RGBA)")
+    ax[0].set_ylabel("MiB")
+    ax[1].set_title(f"compositing ({w}x{h}, images on workers)")
+    ax[1].set_ylabel("s")
+    if "frames" in result:
+        fw, fh = result["frames"]["size"]
+        ax[2].set_title(f"whole frame ({result['frames']['n_tets']:,} tets, {fw}x{fh})")
+    ax[2].set_ylabel("s")
+    for a in ax:
+        a.set_xscale("log", base=2)
+        a.set_xticks(ps, [str(p) for p in ps])
+        a.set_xlabel("bricks P (2 workers)")
+        a.legend()
+    fig.suptitle(f"compositing on the client and on the workers ({result['machine'].get('cpu_count', '?')} cores, "
+                 f"{r['date'][:10]})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
 def chart(result: dict, path: Path) -> None:
     import matplotlib
 
@@ -286,7 +468,8 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--bricks-p", default="1,2,4,8", help="brick counts (default 1,2,4,8)")
     ap.add_argument("--views", type=int, default=3, help="view changes timed after the first frame (default 3)")
-    ap.add_argument("--only", default="series,composite,bricks,accuracy", help="parts to run")
+    ap.add_argument("--composite-p", default="2,4,8,16", help="brick counts for compositing (default 2,4,8,16)")
+    ap.add_argument("--only", default="series,composite,bricks,accuracy,compositing,frames", help="parts to run")
     ap.add_argument("--out", default=str(_HERE / "results"))
     args = ap.parse_args()
     common = _common()
@@ -298,7 +481,8 @@ def main() -> None:
         result = json.loads(path.read_text())
     only = args.only.split(",")
     result["machine"] = common.machine()
-    if set(only) - {"accuracy"}:  # the date of the timed parts (accuracy carries its own)
+    own_date = {"accuracy", "compositing", "frames"}  # parts that carry their own date
+    if set(only) - own_date:  # the date of the other timed parts
         result["date"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     load = {"start": os.getloadavg()}  # other jobs on the machine: what the seconds shared it with
     if "series" in only:
@@ -311,14 +495,24 @@ def main() -> None:
             kept = [b for b in result.get("bricks", []) if abs(b["n_tets"] - res["n_tets"]) > 1]
             result["bricks"] = sorted(kept + [res], key=lambda b: b["n_tets"])  # other sizes keep their last run
             common.write_json(path, result)  # each size as it is done
+    if "compositing" in only:
+        start = os.getloadavg()
+        result["compositing"] = compositing(args)
+        result["compositing"]["load_average_1_5_15_min"] = {"start": start, "end": os.getloadavg()}
+        common.write_json(path, result)
+    if "frames" in only:
+        result["frames"] = frames(args)
+        result["frames"]["date"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     if "accuracy" in only:
         result["accuracy"] = accuracy(args)
     load["end"] = os.getloadavg()
-    if set(only) - {"accuracy"}:  # the load the timed parts shared the machine with
+    if set(only) - own_date:  # the load the timed parts shared the machine with
         result["load_average_1_5_15_min"] = load
     common.write_json(path, result)
     if all(k in result for k in ("series", "bricks")):
         chart(result, path.with_suffix(".png"))
+    if "compositing" in result:
+        chart_compositing(result, path.with_name("distributed_compositing.png"))
     print(f"-> {path}")
 
 

@@ -1,7 +1,9 @@
 """The benchmark tables the docs quote, generated from the JSON in bench/results.
 
 Every table sits in a Markdown file between ``<!-- table:NAME -->`` and
-``<!-- /table:NAME -->``; this script rewrites those blocks from the JSON (``--write``) or
+``<!-- /table:NAME -->``, every number in a sentence between ``<!-- value:NAME -->`` and
+``<!-- /value -->`` (bench/doc_values.py, which also reads the numbers docs/make_images.py
+writes beside its pictures); this script rewrites them from the JSON (``--write``) or
 checks that they agree (the default; ``tests/test_doc_tables.py`` runs the check), so the
 README, the docs and bench/README.md cannot quote numbers the JSON does not hold.
 
@@ -19,9 +21,11 @@ from typing import Any, Callable
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results"
-#: Files whose table blocks this script owns.
-DOCS = (ROOT / "docs" / "interactive.md", ROOT / "README.md", ROOT / "bench" / "README.md", ROOT / "docs" / "methods.md", ROOT / "docs" / "limits.md",
-        ROOT / "docs" / "distributed.md", ROOT / "docs" / "paraview.md")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import doc_values  # noqa: E402 - the numbers in sentences, beside this module
+
+#: Files whose table blocks and value spans this script owns.
+DOCS = (ROOT / "README.md", ROOT / "bench" / "README.md", *sorted((ROOT / "docs").glob("*.md")))
 
 
 def _load(name: str) -> dict[str, Any]:
@@ -182,8 +186,11 @@ def _dist() -> dict[str, Any]:
     return _load("distributed.json")
 
 
-def _when(r: dict[str, Any]) -> str:
+def _when(r: dict[str, Any], part: dict[str, Any] | None = None) -> str:
+    """The machine, the load it shared and the date of a run (``part``: of that part, which
+    carries its own date and load)."""
     m = r.get("machine", {})
+    r = part if part is not None else r
     load = r.get("load_average_1_5_15_min")
     shared = f", shared with other jobs (load average {load['start'][2]:.0f} at the last run)" if load else ""
     return f"{m.get('cpu_count', '?')} cores{shared}, {r['date'][:10]}, `bench/results/distributed.json`"
@@ -289,6 +296,84 @@ def distributed_projection() -> str:
             f"worker) and {ns_comp:.1f} ns per pixel per brick of compositing ({_when(r)}).\n\n" + "\n".join(rows))
 
 
+
+def _size(nbytes: float) -> str:
+    for unit, scale in (("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.1f} {unit}"
+    return f"{nbytes:.0f} B"
+
+
+def distributed_compositing() -> str:
+    """P images composited on the client (all gathered) and on the workers (radix-k), from
+    images already on the workers; and whole frames both ways (bench/distributed.py)."""
+    r = _dist()
+    comp = r["compositing"]
+    rows = ["| image | P | radix-k rounds | Dask tasks | client receives: all / radix-k | between workers (radix-k) "
+            "| time s: all to the client / radix-k | max difference |",
+            "|---|---:|---|---:|---:|---:|---:|---:|"]
+    for x in comp["cases"]:
+        cl, wk = x["client"], x["workers"]
+        rows.append(f"| {x['size'][0]}x{x['size'][1]} | {x['P']} | {' x '.join(str(k) for k in x['factors'])} "
+                    f"| {x['tasks']} | {_size(cl['workers_to_client_bytes'])} / {_size(wk['workers_to_client_bytes'])} "
+                    f"| {_size(wk['between_workers_bytes'])} | {cl['best_s']:.3f} / {wk['best_s']:.3f} "
+                    f"| {x['max_abs_diff']:.1e} |")
+    c = comp["constants"]
+    text = (f"P images held by {comp['workers']} workers in turn (slot i on worker i mod 2, as if each of P workers "
+            f"held one), best of {len(comp['cases'][0]['client']['runs_s'])} alternated runs; bytes from Dask's "
+            f"transfer logs ({_when(r, comp)}). Fitted on the 8x8 rows: {c['s_per_task'] * 1e3:.2f} ms per Dask task "
+            f"(scheduler and workers together on these cores); \"over\" {c['over_ns_per_pixel']:.1f} ns per pixel "
+            f"per image on one core.\n\n" + "\n".join(rows))
+    if "frames" in r:
+        f = r["frames"]
+        frows = ["| P | frame s: all to the client / on the workers | client receives: all / on the workers "
+                 "| max difference |", "|---:|---:|---:|---:|"]
+        for p, v in sorted(f["P"].items(), key=lambda kv: int(kv[0])):
+            frows.append(f"| {p} | {v['median_s']['client']:.2f} / {v['median_s']['workers']:.2f} "
+                         f"| {_size(v['client_bytes']['client'])} / {_size(v['client_bytes']['workers'])} "
+                         f"| {v['max_abs_diff']:.1e} |")
+        text += (f"\n\nWhole frames, renders included: a grid cube of {f['n_tets']:,} tets in P k-d bricks on "
+                 f"{f['workers']} workers at {f['size'][0]}x{f['size'][1]}, the median of "
+                 f"{len(next(iter(f['P'].values()))['workers'])} views of an orbit.\n\n" + "\n".join(frows))
+    return text
+
+
+def _radix_factors(p: int, k: int = 4) -> list[int]:
+    # tetvr.cluster.compositing.radix_factors, without importing tetvr here
+    out, left = [], p
+    while left > 1:
+        f = next((d for d in range(min(k, left), 1, -1) if left % d == 0), None) or next(
+            d for d in range(k + 1, left + 1) if left % d == 0)
+        out.append(f)
+        left //= f
+    return out
+
+
+def distributed_compositing_model() -> str:
+    """Compositing P = 64 and 1,024 full-size images, on paper from the measured constants."""
+    r = _dist()
+    c = r["compositing"]["constants"]
+    n = PROJECTION_PIXELS
+    image = 16 * n
+    link = PROJECTION_LINK_BYTES_PER_S
+    over = c["over_ns_per_pixel"] * 1e-9
+    rows = ["| P | all to the client: client receives | its network s | its compositing s "
+            "| radix-k: client receives | each worker sends and composites | its network s | its compositing s "
+            "| Dask tasks | scheduling s (at most) |",
+            "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for p in (16, 64, 1024):
+        factors = _radix_factors(p)
+        tasks = p + p * sum(k + 1 for k in factors)
+        share = 1 - 1 / p  # of one image, summed over the rounds
+        rows.append(f"| {p:,} | {_size(p * image)} | {p * image / link:.1f} | {p * n * over:.1f} | {_size(image)} "
+                    f"| {_size(share * image)} | {share * image / link:.3f} | {share * n * over:.3f} "
+                    f"| {tasks:,} | {tasks * c['s_per_task']:.1f} |")
+    return (f"A {int(n ** 0.5)}x{int(n ** 0.5)} float32 RGBA image ({_size(image)}) per brick, one brick per worker, "
+            f"{link * 8 / 1e9:.0f} Gb/s links; radix-k in rounds of k = 4; {c['over_ns_per_pixel']:.1f} ns per pixel "
+            f"per \"over\" and {c['s_per_task'] * 1e3:.2f} ms per Dask task as measured above (the tasks: one render "
+            f"per brick, and per round and slot a slice per group member and a composite).\n\n" + "\n".join(rows))
+
+
 def volume_accuracy() -> str:
     """The volume ray caster's defaults (and the commit before its "auto" sizing) against
     the reference at fine settings, with finer settings (bench/volume_accuracy.py)."""
@@ -348,8 +433,11 @@ def viewer_latency() -> str:
     size = "x".join(str(x) for x in r["size"])
     la = r.get("loadavg_start")
     load = f"1-minute load average {la[0]:.1f} on {r['machine'].get('cpu_count', '?')} cores" if la else "load unknown"
+    goal = r.get("goal")
+    aim = (f" Goal: the first pixels within {goal['first_pixels_ms']:.0f} ms of the input, the full frame within "
+           f"{goal['full_frame_ms']:.0f} ms of mouse-up." if goal else "")
     return (f"{size} picture; {r['gesture']}; medians; headless Chromium and JupyterLab on the same machine, "
-            f"Mesa llvmpipe, {load} ({r['date']}, `bench/results/viewer.json`).\n\n" + "\n".join(rows))
+            f"Mesa llvmpipe, {load} ({r['date']}, `bench/results/viewer.json`).{aim}\n\n" + "\n".join(rows))
 
 
 #: The stability table's columns: speed_accuracy.py variant -> heading.
@@ -416,6 +504,106 @@ def imperfect_meshes() -> str:
             f"({r['date']}, `bench/results/imperfect.json`, by `bench/imperfect.py`).\n\n" + "\n".join(rows))
 
 
+def _sa_label(r: dict[str, Any], key: str) -> str:
+    return r["peers"]["labels"].get(key, key)
+
+
+def _sa_order(r: dict[str, Any]) -> list[str]:
+    """tetvr's variants in their groups' order, then the peers."""
+    return list(r["variants"]) + list(r["peers"]["labels"])
+
+
+def speed_accuracy_summary() -> str:
+    """docs/limits.md: every renderer over all scenes, per image size, as the summary chart
+    draws it (bench/speed_accuracy.py)."""
+    r = _load("speed_accuracy.json")
+    sizes = list(r["summary"])
+    rows = ["| group | renderer | " + " | ".join(sizes) + " |", "|---|---|" + "---:|" * len(sizes)]
+    for key in _sa_order(r):
+        cells = []
+        for size in sizes:
+            s = r["summary"][size]["renderers"].get(key)
+            if s is None:
+                cells.append("–")
+                continue
+            if key != "default" and s["same_as_default"] == s["n_scenes"]:
+                cells.append("the default itself in every scene")
+                continue
+            cell = (f"{s['time_ratio']:.2f}x · {s['max_error_median']:.1e} (worst {s['max_error_worst']:.1e}) · "
+                    f"{min(s['psnr_median'], 150):.0f} dB")
+            cells.append(f"**{cell}**" if s["pareto_max"] else cell)
+        group = r["groups"].get(key, "VTK")
+        rows.append(f"| {group} | {_sa_label(r, key)} | " + " | ".join(cells) + " |")
+    n = {size: len(s["scenes"]) for size, s in r["summary"].items()}
+    return (f"Per cell: CPU time per view change relative to the default's (geometric mean over the scenes), "
+            f"the median (and the worst) of each scene's largest per-pixel error, the median PSNR; **bold**: on the "
+            f"Pareto front of time and largest error. "
+            + ", ".join(f"{k}: {v} scenes" for k, v in n.items())
+            + f"; {r['subsample']}; {r.get('gl', {}).get('GL_RENDERER', '?')}, {r['machine'].get('cpu_count', '?')} "
+              f"cores, frames in turn ({r['created']}, `bench/results/speed_accuracy.json`).\n\n" + "\n".join(rows))
+
+
+def speed_accuracy_peers() -> str:
+    """docs/limits.md: per scene and size, tetvr's default beside VTK's three mappers, with
+    links to each scene's chart (bench/speed_accuracy.py)."""
+    sys.path.insert(0, str(ROOT / "bench"))
+    from speed_charts import runs, slug
+
+    r = _load("speed_accuracy.json")
+    peers = list(r["peers"]["labels"])
+    rows = ["| scene | tets | size | tetvr default | " + " | ".join(_sa_label(r, k) for k in peers) + " |",
+            "|---|---:|---|" + "---:|" * (len(peers) + 1)]
+
+    def cell(row: dict[str, Any] | None) -> str:
+        if not row or "frame_s" not in row:
+            return "failed" if row else "–"
+        return f"{row['frame_s'] * 1e3:.0f} ms · {row['max_error']:.1e} · {min(row['psnr'], 150):.0f} dB"
+
+    for size, scenes in runs(r).items():
+        for name, rec in scenes.items():
+            chart = f"[{name}](../bench/results/speed_accuracy_{slug(name)}.png)"
+            rows.append(f"| {chart} | {rec['n_tets']:,} | {size} | {cell(rec['variants']['default'])} | "
+                        + " | ".join(cell(rec["peers"].get(k)) for k in peers) + " |")
+    return (f"Per cell: median CPU time per view change (all threads of the process that renders) · largest "
+            f"per-pixel error · PSNR, against the exact "
+            f"reference; each scene's name links to its chart ({r['created']}, "
+            f"`bench/results/speed_accuracy.json`; {r['peers']['vtk']}; ParaView: {r['paraview']['reason']}).\n\n"
+            + "\n".join(rows))
+
+
+def speed_accuracy_stability() -> str:
+    """docs/limits.md: the stability chart's numbers: per failure class, each method's
+    largest per-pixel error (bench/speed_accuracy.py)."""
+    r = _load("speed_accuracy.json")
+    classes = r["stability_summary"]
+    methods = list(classes[0]["methods"])
+
+    def cell(rec: dict[str, Any]) -> str:
+        text = "–" if rec["max_error"] is None else f"{rec['max_error']:.1e}"
+        if rec["refused"]:
+            text += f" (refused {rec['refused']}/{rec['of']})" if rec["max_error"] is not None else " refused"
+        if rec["failed"]:
+            text += f" (failed {rec['failed']}/{rec['of']})" if rec["max_error"] is not None else " failed"
+        return text
+
+    # within 1/255 in every view it drew; a refusal (tet marching, saying why) draws nothing wrong
+    within = {m: sum((c["methods"][m]["max_error"] is None or c["methods"][m]["max_error"] <= 1 / 255)
+                     and not c["methods"][m]["failed"] for c in classes) for m in methods}
+    rows = ["| class | views | " + " | ".join("tetvr default" if m == "default" else _sa_label(r, m) for m in methods)
+            + " |", "|---|---:|" + "---:|" * len(methods)]
+    for c in classes:
+        name = f"`{c['name']}`" if c["kind"] == "stability case" else c["name"]
+        rows.append(f"| {name} | {c['views']} | " + " | ".join(cell(c["methods"][m]) for m in methods) + " |")
+    n_cases = sum(c["kind"] == "stability case" for c in classes)
+    size = "x".join(str(v) for v in r["stability_size"])
+    return (f"Largest per-pixel error against the exact reference at {size}, over {n_cases} stability cases and "
+            f"{len(classes) - n_cases} imperfect-mesh classes (the worst of each class's meshes and views). Within "
+            f"1/255 in every view drawn (refused: raised an error saying why; failed: VTK drew nothing): "
+            + ", ".join(f"{'tetvr default' if m == 'default' else _sa_label(r, m)} {within[m]} of {len(classes)}"
+                        for m in methods)
+            + f" ({r['created']}, `bench/results/speed_accuracy.json`).\n\n" + "\n".join(rows))
+
+
 _FRAME_KINDS = {"raymarch": 'tet marching (`method="auto"` on this mesh, `"raymarch"`)',
                 "projected": 'projected tetrahedra (`method="projected"`)',
                 "raycast": "the volume ray caster (`tetvr.gl.Raycaster`)",
@@ -473,17 +661,22 @@ TABLES: dict[str, Callable[[], str]] = {"imperfect_meshes": imperfect_meshes, "f
                                         "distributed_series": distributed_series,
                                         "distributed_bricks": distributed_bricks,
                                         "distributed_accuracy": distributed_accuracy,
-                                        "distributed_projection": distributed_projection}
+                                        "distributed_projection": distributed_projection,
+                                        "distributed_compositing": distributed_compositing,
+                                        "distributed_compositing_model": distributed_compositing_model}
+TABLES.update(speed_accuracy_summary=speed_accuracy_summary, speed_accuracy_peers=speed_accuracy_peers,
+              speed_accuracy_stability=speed_accuracy_stability)
 _BLOCK = re.compile(r"(<!-- table:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /table:(?P=name) -->)", re.S)
 
 
 def render(text: str) -> str:
-    """``text`` with every known table block regenerated."""
+    """``text`` with every known table block and every value span
+    (``<!-- value:NAME -->...<!-- /value -->``, bench/doc_values.py) regenerated."""
     def sub(m: re.Match[str]) -> str:
         make = TABLES.get(m.group("name"))
         return m.group(0) if make is None else m.group(1) + make() + "\n" + m.group(4)
 
-    return _BLOCK.sub(sub, text)
+    return doc_values.render(_BLOCK.sub(sub, text))
 
 
 def main(argv: list[str] | None = None) -> int:

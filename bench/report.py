@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -52,7 +53,7 @@ def main(argv: list[str]) -> int:
         print("| case | default | worst variant |")
         print("|---|---|---|")
         for n, d in r["stability"].items():
-            worst = min(d, key=lambda k: d[k]["psnr"])
+            worst = min(d, key=lambda k: math.inf if d[k].get("psnr") is None else d[k]["psnr"])  # refused: none
             print(f"| {n} | {d['default']['psnr']:.1f} | {worst}: {d[worst]['psnr']:.1f} |")
     sweeps = {s: d["table_convergence"] for s, d in scenes.items() if d.get("table_convergence")}
     if sweeps:

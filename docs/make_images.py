@@ -2,14 +2,17 @@
 
     pip install -e ".[bench]"             # matplotlib, for the labelled panels
     python docs/make_images.py            # everything, ~1 minute on llvmpipe
-    python docs/make_images.py methods    # one group: quickstart, defaults, methods, fusion, limits, interactive,
-                                          # clipping
+    python docs/make_images.py methods    # one group: quickstart, defaults, before_after, methods, fusion,
+                                          # limits, interactive, clipping
 
-Every picture under docs/images/guide/ comes from this script; docs/images/demo.png from
+Every picture under docs/images/guide/ comes from this script, and the before/after
+pictures docs/images/defaults_before_after_*.png (from the shared real data); docs/images/demo.png from
 `tetvr demo -o docs/images/demo.png`; docs/images/fusion/ from
 `tetvr fusion-demo -o docs/images/fusion`. Each panel title states what it shows and,
 where there is a reference, the PSNR (dB, premultiplied RGB) against the exact CPU
-renderer. Difference panels are magnified by the factor in their title.
+renderer. Difference panels are magnified by the factor in their title. The method
+pictures' numbers go to docs/images/guide/methods/psnr.json, which the docs quote through
+bench/doc_values.py (`python bench/doc_tables.py --write` after this script).
 """
 
 from __future__ import annotations
@@ -139,43 +142,109 @@ def defaults():
                suptitle="constant opacity over the field's full range (left) and the data-driven default (right)")
 
 
-#: setting name -> (scene, variant settings, what it shows)
+def _sphere_framed(mesh, direction=(-1.0, -0.6, -1.2), view_angle=30.0):
+    """The framing tetvr's defaults had before ``Camera.fit`` framed the projected extent:
+    the bounding sphere fills the picture's short side (same direction and view up)."""
+    from tetvr.core.camera import bounding_sphere, default_view_up
+
+    centre, radius = bounding_sphere(mesh.bounds)
+    d = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+    dist = radius / np.sin(np.radians(view_angle) / 2)
+    return Camera(position=tuple(centre - d * dist), focal_point=tuple(centre), view_up=tuple(default_view_up(d)),
+                  view_angle=view_angle)
+
+
+def before_after(size=(640, 480)):
+    """docs/images/defaults_before_after_*.png (docs/pictures.md): each real result of
+    DEFAULT_MESHES as the former defaults drew it, beside the PNG `tetvr render FILE` writes."""
+    import subprocess
+    import tempfile
+
+    from matplotlib.image import imread
+
+    from tetvr.optics.transfer import default_unit_distance
+
+    for name, field in DEFAULT_MESHES:
+        path = SHARED / "tets" / name
+        if not path.is_file():
+            print(f"skipped {name}: {path} is absent (the shared data)")
+            continue
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            mesh = tetvr.read(path, field)
+        tf = TransferFunction.preset("viridis", mesh.scalar_range, opacity=0.5,
+                                     unit_distance=default_unit_distance(mesh.bounds))
+        before = tetvr.render(mesh, camera=_sphere_framed(mesh), tf=tf, size=size)
+        with tempfile.TemporaryDirectory() as tmp:
+            png = Path(tmp) / "after.png"
+            subprocess.run([str(Path(sys.executable).with_name("tetvr")), "render", str(path), "--scalars", field,
+                            "--size", f"{size[0]}x{size[1]}", "-o", str(png)], check=True)
+            rgb = imread(png)[..., :3]  # an opaque PNG: premultiplied is the same
+        after = np.concatenate([rgb, np.ones(rgb.shape[:2] + (1,))], axis=2).astype(np.float32)
+        stem = Path(name).stem.removesuffix("_tets")  # bluntfin_tets.vtu: defaults_before_after_bluntfin.png
+        panels([before, after], ["before: full range, opacity 0.5, bounding sphere framed",
+                                 f"tetvr render {name} --scalars {field}"],
+               ROOT / "docs" / "images" / f"defaults_before_after_{stem}.png", cols=2, size_in=5.0)
+
+
+#: Projected tetrahedra with every other setting at its default: the baseline of the settings
+#: only projected tetrahedra have (the default method, tet marching, ignores them).
+PROJECTED = RenderSettings(method="projected")
+DEFAULT = RenderSettings()
+PREMULTIPLIED = RenderSettings(table_encoding="premultiplied")
+
+#: picture name -> (scene, (baseline label, baseline settings), variant settings, what it shows).
 METHOD_PICTURES = {
-    "perspective_correct": (close_perspective, RenderSettings(perspective_correct=False),
+    "perspective_correct": (close_perspective, ("projected", PROJECTED),
+                            RenderSettings(method="projected", perspective_correct=False),
                             "perspective_correct=False: scalars and thickness linear in screen space"),
-    "table_encoding": (close_perspective, RenderSettings(table_encoding="premultiplied"),
+    "table_encoding": (close_perspective, ("default", DEFAULT), PREMULTIPLIED,
                        "table_encoding='premultiplied': alpha interpolated across thickness slices"),
-    "table_filter": (close_perspective, RenderSettings(table_encoding="premultiplied", table_filter="cubic"),
-                     "premultiplied table with table_filter='cubic' (compare with the one above)"),
-    "table_dtype": (post_scene, RenderSettings(table_dtype="uint8"), "table_dtype='uint8': 8-bit table"),
-    "framebuffer": (post_scene, RenderSettings(framebuffer="uint8"), "framebuffer='uint8': 8-bit compositing"),
-    "table_scalar_bins": (lambda: stability("spike_tf"), RenderSettings(table_scalar_bins=64),
+    "table_filter": (close_perspective, ("premultiplied", PREMULTIPLIED),
+                     RenderSettings(table_encoding="premultiplied", table_filter="cubic"),
+                     "table_filter='cubic' on the premultiplied table (baseline: the same table, linear)"),
+    "table_dtype": (post_scene, ("default", DEFAULT), RenderSettings(table_dtype="uint8"),
+                    "table_dtype='uint8': an 8-bit table"),
+    "framebuffer": (post_scene, ("projected", PROJECTED), RenderSettings(method="projected", framebuffer="uint8"),
+                    "framebuffer='uint8': 8-bit compositing (projected tetrahedra)"),
+    "table_scalar_bins": (lambda: stability("spike_tf"), ("default", DEFAULT), RenderSettings(table_scalar_bins=64),
                           "table_scalar_bins=64 on a thin opacity spike (iso-layer)"),
-    "table_align_nodes": (lambda: stability("camera_inside"), RenderSettings(table_align_nodes=False),
+    "table_align_nodes": (lambda: stability("camera_inside"), ("default", DEFAULT),
+                          RenderSettings(table_align_nodes=False),
                           "table_align_nodes=False: even nodes miss the colour map's points at k/8"),
-    "table_thickness_slices": (rings, RenderSettings(table_thickness_slices=8, table_log_base=4.0),
+    "table_thickness_slices": (rings, ("default", DEFAULT), RenderSettings(table_thickness_slices=8, table_log_base=4.0),
                                "table_thickness_slices=8, table_log_base=4 on opaque rings"),
-    "sort_none": (rings, RenderSettings(sort="none"), "sort='none': cells drawn in input order"),
-    "sort_mpvonc": (close_perspective, RenderSettings(sort="centroid"),
-                    "sort='centroid' where it is slightly wrong; the default (MPVONC) is exact"),
-    "sort_centroid_rings": (rings, RenderSettings(sort="centroid"),
-                            "sort='centroid' on interlocking rings; the default (xmpvo) orders the parts"),
-    "sort_mpvonc_rings": (rings, RenderSettings(sort="mpvonc"),
+    "sort_none": (rings, ("projected", PROJECTED), RenderSettings(method="projected", sort="none"),
+                  "sort='none': cells drawn in input order (projected tetrahedra)"),
+    "sort_mpvonc": (close_perspective, ("projected", PROJECTED), RenderSettings(method="projected", sort="centroid"),
+                    "sort='centroid' where it is slightly wrong; projected's default here is MPVONC"),
+    "sort_centroid_rings": (rings, ("projected", PROJECTED), RenderSettings(method="projected", sort="centroid"),
+                            "sort='centroid' on interlocking rings; projected's default here is xmpvo"),
+    "sort_mpvonc_rings": (rings, ("projected", PROJECTED), RenderSettings(method="projected", sort="mpvonc"),
                           "sort='mpvonc' on interlocking rings: its depth heuristic between parts fails"),
-    "optics_vtk": (post_scene, RenderSettings(optics="vtk", perspective_correct=False),
+    "optics_vtk": (post_scene, ("default", DEFAULT), RenderSettings(optics="vtk", perspective_correct=False),
                    "optics='vtk' + screen-linear: VTK's projected-tetrahedra convention"),
-    "integration": (lambda: stability("spike_tf"), RenderSettings(integration="exact"),
+    "integration": (lambda: stability("spike_tf"), ("default", DEFAULT), RenderSettings(integration="exact"),
                     "integration='exact' on a thin opacity spike: tet marching without the table"),
 }
 
 
+def _changed(settings: RenderSettings) -> dict:
+    return {f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)
+            if getattr(settings, f.name) != getattr(DEFAULT, f.name)}
+
+
 def methods(size=(160, 160), only=None):
-    """One picture per METHOD_PICTURES entry (``only``: those names), its PSNRs merged into
-    docs/images/guide/methods/psnr.json."""
+    """One picture per METHOD_PICTURES entry (``only``: those names): the reference, the
+    baseline, the variant and both errors. Its numbers go to docs/images/guide/methods/psnr.json,
+    which the docs quote through bench/doc_values.py."""
+    from tetvr.optics.tablesize import resolve as table_size
+    from tetvr.order.method import choose
+
     path = OUT / "methods" / "psnr.json"
-    summary = json.loads(path.read_text()) if path.is_file() else {}
+    summary = json.loads(path.read_text()) if path.is_file() and only else {}
     refs = {}
-    for name, (make, settings, what) in METHOD_PICTURES.items():
+    for name, (make, (base_label, base), settings, what) in METHOD_PICTURES.items():
         if only is not None and name not in only:
             continue
         mesh, cam, tf = make()
@@ -183,22 +252,25 @@ def methods(size=(160, 160), only=None):
         if key not in refs:
             refs[key] = render_reference(mesh, cam, tf, size)
         ref = refs[key]
-        with tetvr.Renderer() as r:
-            base = r.render(mesh, cam, tf, size=size)
-        with tetvr.Renderer(settings) as r:
-            var = r.render(mesh, cam, tf, size=size)
-        p0, p1 = psnr(base, ref), psnr(var, ref)
-        k = _nice(0.8 / max(float(np.abs(var[..., :3] - ref[..., :3]).max()), 1e-6))
-        changed = {f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)
-                   if getattr(settings, f.name) != getattr(RenderSettings(), f.name)}
-        label = ", ".join(f"{a}={b!r}" for a, b in changed.items())
-        panels([ref, base, var, _diff(base, ref, k), _diff(var, ref, k)],
-               ["exact reference", f"default: {p0:.1f} dB", f"{label}:\n{p1:.1f} dB",
-                f"|default - ref| x {k}", f"|variant - ref| x {k}"],
+        images = []
+        for s in (base, settings):
+            with tetvr.Renderer(s) as r:
+                images.append(r.render(mesh, cam, tf, size=size))
+        (b, v), (p0, p1) = images, (psnr(images[0], ref), psnr(images[1], ref))
+        k = _nice(0.8 / max(float(np.abs(v[..., :3] - ref[..., :3]).max()), 1e-6))
+        panels([ref, b, v, _diff(b, ref, k), _diff(v, ref, k)],
+               ["exact reference", f"{base_label}: {p0:.1f} dB", f"variant: {p1:.1f} dB",
+                f"|{base_label} - ref| x {k}", f"|variant - ref| x {k}"],
                OUT / "methods" / f"{name}.png", suptitle=what, size_in=2.0)
-        summary[name] = {"default_psnr": round(p0, 1), "variant_psnr": round(p1, 1), "magnification": k}
-    path.write_text(json.dumps(summary, indent=1))
-    print("wrote", (OUT / "methods" / "psnr.json").relative_to(ROOT))
+        t = table_size(base, tf, mesh)
+        summary[name] = {"what": what, "size": list(size), "base": base_label,
+                         "base_settings": {a: repr(x) for a, x in _changed(base).items()},
+                         "variant_settings": {a: repr(x) for a, x in _changed(settings).items()},
+                         "base_method": choose(base, mesh), "variant_method": choose(settings, mesh),
+                         "base_table": [t.n_bins, t.n_slices], "base_table_warped": bool(t.warp),
+                         "base_psnr": round(p0, 1), "variant_psnr": round(p1, 1), "magnification": k}
+    path.write_text(json.dumps(summary, indent=1) + "\n")
+    print("wrote", path.relative_to(ROOT))
 
 
 def fusion(size=(320, 240)):
@@ -233,12 +305,13 @@ def limits(size=(96, 96)):
             k = _nice(0.8 / max(float(np.abs(img[..., :3] - ref[..., :3]).max()), 1e-6))
             gpu.append(img)
             diffs.append(_diff(img, ref, k))
-            titles.append(f"{name}\n{'exact (empty image)' if p > 150 else f'{p:.1f} dB'}")
-            dtitles.append(f"{name}\n|GPU - ref| x {k}")
-    panels(gpu, titles, OUT / "stability_cases.png", cols=6, size_in=1.7,
+            titles.append(f"{name}: {'exact (empty)' if p > 150 else f'{p:.1f} dB'}")
+            dtitles.append(f"{name}: x {k}")
+    # One line per title: panels() leaves one line of room above each row.
+    panels(gpu, titles, OUT / "stability_cases.png", cols=6, size_in=1.9,
            suptitle="the stability cases, default settings, 96x96 (PSNR against the reference)")
-    panels(diffs, dtitles, OUT / "stability_errors.png", cols=6, size_in=1.7,
-           suptitle="where the error is (each magnified to show its shape)")
+    panels(diffs, dtitles, OUT / "stability_errors.png", cols=6, size_in=1.9,
+           suptitle="|GPU - reference|, each panel magnified by its factor to show the shape of the error")
 
 
 def interactive():
@@ -295,7 +368,7 @@ def clipping(size=(240, 180)):
            suptitle="post.vtk: clip planes, a clip box, an opaque surface (default settings; PSNR against the reference)")
 
 
-GROUPS = {"quickstart": quickstart, "defaults": defaults, "methods": methods, "fusion": fusion, "limits": limits, "interactive": interactive,
+GROUPS = {"quickstart": quickstart, "defaults": defaults, "before_after": before_after, "methods": methods, "fusion": fusion, "limits": limits, "interactive": interactive,
           "clipping": clipping}
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import re
 import threading
 import time
 
@@ -283,3 +284,173 @@ def test_a_frame_with_every_worker_gone_fails_clearly(lone, monkeypatch):
 
     with pytest.raises(TimeoutError, match="rendering the steps: no Dask worker has been connected"):
         render_series([mesh], camera=camera, tf=tf, size=(32, 32), client=lone, progress=False)
+
+
+# ---- no file system shared with the client ----
+
+# A dask worker whose process may open no file under the folder TETVR_TEST_HIDDEN names
+# (a Python audit hook refuses it, as if the folder were on another machine).
+_SANDBOXED_WORKER = """
+import os, sys
+hidden = os.environ["TETVR_TEST_HIDDEN"]
+def hook(event, args):
+    if event == "open" and isinstance(args[0], (str, bytes)):
+        path = os.path.abspath(os.fsdecode(args[0]))
+        if path == hidden or path.startswith(hidden + os.sep):
+            raise PermissionError(13, "not on this worker's machine", path)
+sys.addaudithook(hook)
+from distributed.cli.dask_worker import main
+sys.argv = ["dask-worker", sys.argv[1], "--nthreads", "1", "--no-nanny", "--no-dashboard"]
+main()
+"""
+
+
+@pytest.fixture(scope="module")
+def elsewhere(tmp_path_factory):
+    """A scheduler and 2 workers that share no files with this client: each worker runs in
+    its own working directory and may open nothing under this test session's temporary
+    folder, where the tests write their inputs. Yields (client, the workers' directory)."""
+    import shutil
+    import subprocess
+    import sys
+    import tempfile
+
+    hidden = str(tmp_path_factory.getbasetemp().resolve())
+    folder = tempfile.mkdtemp(prefix="tetvr-workers-")
+    assert not folder.startswith(hidden + os.sep)
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # for this module's functions
+    env = dict(os.environ, TETVR_TEST_HIDDEN=hidden, PYTHONPATH=root)
+    with distributed.LocalCluster(n_workers=0, dashboard_address=":0") as cluster:
+        procs = [subprocess.Popen([sys.executable, "-c", _SANDBOXED_WORKER, cluster.scheduler_address], cwd=folder,
+                                  env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for _ in range(2)]
+        try:
+            with distributed.Client(cluster) as c:
+                c.wait_for_workers(2, timeout=90)
+                yield c, folder
+        finally:
+            for p in procs:
+                p.terminate()
+            for p in procs:
+                p.wait(30)
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def _opened(path):
+    try:
+        with open(path, "rb"):
+            return "read"
+    except OSError as exc:
+        return type(exc).__name__
+
+
+def _write_pieces(folder, mesh, n_pieces):
+    """``mesh`` as ``mesh.pvtu`` of ``n_pieces`` slabs along x, each with its own points."""
+    import meshio
+
+    x = mesh.centroids[:, 0]
+    part = np.searchsorted(np.quantile(x, np.linspace(0, 1, n_pieces + 1)[1:-1]), x)
+    rows = []
+    for k in range(n_pieces):
+        used, local = np.unique(mesh.tets[part == k], return_inverse=True)
+        meshio.Mesh(mesh.points[used], [("tetra", local.reshape(-1, 4))],
+                    point_data={"f": mesh.scalars[used]}).write(os.path.join(folder, f"piece_{k}.vtu"))
+        rows.append(f'<Piece Source="piece_{k}.vtu"/>')
+    with open(os.path.join(folder, "mesh.pvtu"), "w") as f:
+        f.write('<VTKFile type="PUnstructuredGrid"><PUnstructuredGrid GhostLevel="0"><PPointData>'
+                '<PDataArray type="Float64" Name="f"/></PPointData><PPoints><PDataArray type="Float64" '
+                'NumberOfComponents="3"/></PPoints>' + "".join(rows) + "</PUnstructuredGrid></VTKFile>")
+
+
+def _write_steps(folder, mesh, n_steps):
+    import meshio
+
+    rows = []
+    for k in range(n_steps):
+        meshio.Mesh(mesh.points, [("tetra", mesh.tets)], point_data={"f": mesh.scalars * (1 + 0.5 * k)}).write(
+            os.path.join(folder, f"s{k}.vtu"))
+        rows.append(f'<DataSet timestep="{k}" part="0" file="s{k}.vtu"/>')
+    with open(os.path.join(folder, "run.pvd"), "w") as f:
+        f.write('<VTKFile type="Collection"><Collection>' + "".join(rows) + "</Collection></VTKFile>")
+
+
+def test_pieces_by_a_relative_path_reach_workers_that_cannot_see_them(elsewhere, tmp_path, monkeypatch):
+    """A .pvtu named relative to the client's working directory, which the workers can
+    neither open (checked) nor resolve (their working directory holds a different mesh
+    under the same names): its pieces are read here and sent as bytes, and the composite
+    is the merged mesh's single image (planes along the grid's faces: float32 rounding)."""
+    import tetvr
+    from tetvr.cluster.distributed import distribute_pieces
+    from tetvr.gl import Renderer
+
+    c, folder = elsewhere
+    mesh = synthetic.cube(6, rotate=False)
+    _write_pieces(str(tmp_path), mesh, 3)
+    _write_pieces(folder, synthetic.cube(3, rotate=False), 3)  # what a worker would find at the same names
+    assert set(c.run(_opened, str(tmp_path / "mesh.pvtu")).values()) == {"PermissionError"}
+    monkeypatch.chdir(tmp_path)
+    camera, tf = _view(mesh, inside=False)
+    bricks = distribute_pieces("mesh.pvtu", 2, c)
+    try:
+        image = bricks.render(camera, tf, size=(48, 40))
+    finally:
+        bricks.release()
+    with Renderer() as r:
+        whole = r.render(tetvr.read(tmp_path / "mesh.pvtu"), camera, tf, size=(48, 40))
+    assert whole[..., 3].max() > 0.3
+    assert np.abs(image - whole).max() <= 1e-5
+
+
+def test_series_by_relative_paths_with_frames_written_here(elsewhere, tmp_path, monkeypatch):
+    """A .pvd and a list of files named relative to the client's working directory reach
+    workers that cannot see them (bytes sent); the PNG frames, encoded on the workers,
+    are written here, relative to the client's working directory, and are the bytes of
+    this process's renders."""
+    import tetvr
+    from tetvr.cluster.timeseries import render_series
+    from tetvr.core.image import png_bytes
+    from tetvr.gl import Renderer
+    from tetvr.io.series import read_step
+
+    c, folder = elsewhere
+    mesh = synthetic.cube(4)
+    _write_steps(str(tmp_path), mesh, 2)
+    _write_steps(folder, synthetic.cube(3), 2)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "frames").mkdir()
+    camera, tf = Camera.fit(mesh), TransferFunction.preset("viridis", (0.0, 1.5), unit_distance=0.2)
+    with Renderer() as r:  # this process's frames of the steps, read as the serial readers read them
+        want = {"run.pvd": [png_bytes(r.render(read_step("run.pvd", k), camera, tf, size=(40, 32))) for k in range(2)],
+                "files": [png_bytes(r.render(tetvr.read(f"s{k}.vtu"), camera, tf, size=(40, 32))) for k in range(2)]}
+    for steps in ("run.pvd", ["s0.vtu", "s1.vtu"]):
+        names = render_series(steps, camera=camera, tf=tf, size=(40, 32), output="frames/f_{index}.png", client=c,
+                              progress=False)
+        assert names == ["frames/f_0.png", "frames/f_1.png"]
+        assert [(tmp_path / n).read_bytes() for n in names] == want["run.pvd" if steps == "run.pvd" else "files"]
+        assert set(c.run(os.path.exists, "frames").values()) == {False}  # nothing written where the workers are
+
+
+def test_urls_are_read_and_written_by_the_workers(elsewhere, tmp_path):
+    """Steps given as file:// URLs of the workers' own file system are read there in
+    place, and frames given as a URL pattern are written there by the workers; a URL the
+    workers cannot read, or a path missing here, fails naming it."""
+    from tetvr.cluster.timeseries import render_series
+
+    c, folder = elsewhere
+    mesh = synthetic.cube(3)
+    _write_steps(folder, mesh, 2)
+    os.mkdir(os.path.join(folder, "out"))
+    camera, tf = Camera.fit(mesh), TransferFunction.preset("viridis", (0.0, 1.5), unit_distance=0.2)
+    steps = [f"file://{folder}/s{k}.vtu" for k in range(2)]
+    pattern = f"file://{folder}/out/f_{{index}}.png"
+    names = render_series(steps, camera=camera, tf=tf, size=(40, 32), output=pattern, client=c, progress=False)
+    assert names == [pattern.format(index=k) for k in range(2)]
+    assert sorted(os.listdir(os.path.join(folder, "out"))) == ["f_0.png", "f_1.png"]
+    images = render_series(f"file://{folder}/run.pvd", camera=camera, tf=tf, size=(40, 32), client=c,
+                           progress=False)
+    assert len(images) == 2 and images[0][..., 3].max() > 0.2 and not np.array_equal(images[0], images[1])
+    _write_steps(str(tmp_path), mesh, 1)
+    hidden = f"file://{tmp_path}/s0.vtu"
+    with pytest.raises((OSError, ValueError), match=re.escape(repr(hidden))):
+        render_series([hidden], camera=camera, tf=tf, size=(40, 32), client=c, progress=False)
+    with pytest.raises(FileNotFoundError, match=r"mesh file not found on the client: 'missing\.vtu' \(in '.*'"):
+        render_series(["missing.vtu"], camera=camera, tf=tf, size=(40, 32), client=c, progress=False)

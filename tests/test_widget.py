@@ -420,15 +420,82 @@ def test_preview_sizer_follows_the_measured_cost():
         s.observe(0.04 + 1e-6 * w * h, size=(w, h), full=full)
     assert s.overhead_s == pytest.approx(0.04) and s.per_pixel_s == pytest.approx(1e-6)
     assert s.size(full)[0] * s.size(full)[1] == pytest.approx(60_000, rel=0.01)
-    # The overhead alone is over the budget: no smaller than the pixels the overhead costs.
+    # The overhead alone is over the budget: the pixels get half the budget (25 ms: 25k pixels).
     s = PreviewSizer(budget_s=0.05, min_scale=0.05, max_growth=10.0)
     for w, h in [(400, 300), (200, 150), (100, 75)]:
         s.observe(0.08 + 1e-6 * w * h, size=(w, h), full=full)
-    assert s.size(full)[0] * s.size(full)[1] == pytest.approx(80_000, rel=0.01)
+    assert s.size(full)[0] * s.size(full)[1] == pytest.approx(25_000, rel=0.02)
+    # A loaded machine: a fixed 0.3 s and 4 us a pixel. The pixels get 50 ms (12.5k, under
+    # min_scale: 140 px wide), not as much as the fixed cost (75k pixels, a 0.6 s preview).
+    s = PreviewSizer(budget_s=0.1, max_growth=10.0)
+    for w, h in [(560, 420), (140, 105), (280, 210)]:
+        s.observe(0.3 + 4e-6 * w * h, size=(w, h), full=(560, 420))
+    assert s.overhead_s == pytest.approx(0.3) and s.size((560, 420)) == (140, 105)
     s.observe(100.0, size=full, full=full)
     assert s.scale >= 0.05  # never below min_scale
     with pytest.raises(ValueError, match="budget_s"):
         PreviewSizer(budget_s=0.0)
+    # A cold frame (bluntfin's first: 10 s, the mesh sent and its records built) bounds the
+    # cost until a warm frame is measured; it is not a sample, and it never shrinks a warm estimate.
+    full = (560, 420)
+    s = PreviewSizer(budget_s=0.1)
+    s.observe(10.0, size=full, full=full, cold=True)
+    assert s.size(full) == (140, 105) and s.samples == []  # a quarter of the width at least
+    s.observe(4.3e-6 * 140 * 105, size=(140, 105), full=full)  # warm: 4.3 us a pixel
+    assert s.size(full)[0] * s.size(full)[1] == pytest.approx(0.1 / 4.3e-6, rel=0.02)  # ~176 px wide
+    s.observe(30.0, size=full, full=full, cold=True)
+    assert s.size(full)[0] * s.size(full)[1] == pytest.approx(0.1 / 4.3e-6, rel=0.02)
+    s.reset()
+    assert s.samples == [] and s.scale == 0.5
+
+
+class CostedRenderer(RecordingRenderer):
+    """Takes no time, but moves a fake clock on by what a frame would cost: ``cold_s`` for
+    the first frame of a mesh, ``per_pixel_s`` a pixel after that."""
+
+    def __init__(self, clock, cold_s, per_pixel_s):
+        super().__init__()
+        self.clock, self.cold_s, self.per_pixel_s = clock, cold_s, per_pixel_s
+        self.meshes = set()
+
+    def render(self, mesh, camera, tf, *, size, order=None):
+        cold = id(mesh) not in self.meshes
+        self.meshes.add(id(mesh))
+        self.clock.now += self.cold_s if cold else self.per_pixel_s * size[0] * size[1]
+        return super().render(mesh, camera, tf, size=size, order=order)
+
+
+def test_render_loop_sizes_previews_by_the_warm_cost_of_this_mesh(tmp_path):
+    """bluntfin at 560x420: a 10 s first frame, then 4.3 us a pixel (measured through the
+    render process). The first frame's cost is no measure of a preview's: previews are a
+    quarter of the width before a warm frame is measured, then the ~23k pixels 0.1 s buys."""
+    from tetvr.apps.viewer.loop import RenderLoop
+
+    clock = Clock()
+    rec = CostedRenderer(clock, cold_s=10.0, per_pixel_s=4.3e-6)
+    model = ViewerModel(_scene(tmp_path, size=(560, 420)), renderer=rec)
+    loop = RenderLoop(model, lambda f: None, settle_s=0.25, budget_s=0.1, clock=clock)
+    try:
+        loop.update(final=True)
+        assert loop.wait_idle(10) and loop.last_frame.seconds == 10.0
+        sizes = []
+        for _ in range(3):
+            n = loop.frames
+            loop.update(lambda m: m.control.azimuth(2.0))
+            sizes.append(loop.wait_frame(n, 10).size)
+        loop.settle()
+        assert loop.wait_idle(10) and loop.last_frame.size == (560, 420)
+        assert sizes[0] == (140, 105)
+        assert all(w * h == pytest.approx(0.1 / 4.3e-6, rel=0.02) for w, h in sizes[1:]), sizes
+        # Another mesh: its first frame is cold again, and the last mesh's costs are forgotten.
+        rec.per_pixel_s = 1e-6
+        loop.update(lambda m: setattr(m, "mesh", synthetic.cube(3)), final=True)
+        assert loop.wait_idle(10) and loop.sizer.samples == []
+        n = loop.frames
+        loop.update(lambda m: m.control.azimuth(2.0))
+        assert loop.wait_frame(n, 10).size == (140, 105)
+    finally:
+        loop.close()
 
 
 def test_render_loop_draws_the_latest_state_and_drops_stale_ones(tmp_path):
@@ -518,11 +585,32 @@ def test_render_loop_reports_errors_and_recovers(tmp_path):
 
 
 # ---------------------------------------------------------------- the Jupyter viewer (no browser)
+@pytest.fixture(autouse=True)
+def _browser_stub(monkeypatch):
+    """What the browser does with the picture's frames: each frame sent is recorded in
+    ``canvas.sent`` and acknowledged at once (``canvas.acks = False``: never)."""
+    try:
+        from tetvr.apps.viewer.jupyter import _Canvas
+    except ImportError:  # no jupyter_rfb: the viewer's tests skip
+        return
+    real = _Canvas._rfb_send_frame
+
+    def send(self, array, is_lossless_redraw=False):
+        real(self, array, is_lossless_redraw)
+        self.__dict__.setdefault("sent", []).append(array)
+        if self.__dict__.get("acks", True):
+            self._frame_feedback = {"index": self._rfb_frame_index, "timestamp": 0.0, "localtime": 0.0}
+
+    monkeypatch.setattr(_Canvas, "_rfb_send_frame", send)
+
+
 def _viewer(tmp_path, renderer=None, **kw):
     pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
     from tetvr.apps.viewer import Viewer
 
-    return Viewer(_scene(tmp_path), renderer=renderer or RecordingRenderer(), **kw)
+    v = Viewer(_scene(tmp_path), renderer=renderer or RecordingRenderer(), **kw)
+    v.canvas._has_visible_views = True  # the page shows it
+    return v
 
 
 def _drag(target, points, button=1, modifiers=()):
@@ -539,7 +627,7 @@ def test_viewer_mouse_orbits_pans_zooms_and_ends_on_the_full_frame(tmp_path):
     v = _viewer(tmp_path, SlowRenderer(0.01), settle_s=0.1)
     try:
         assert v.loop.wait_idle(10)
-        first = v._image_frame()
+        first = v.canvas.sent[-1]
         assert first.shape == (60, 80, 3) and first.dtype == np.uint8 and "full 80×60" in v.status.value
         home = v.model.camera
         _drag(v._image_event, [(10, 10), (20, 12), (30, 15)])
@@ -551,7 +639,7 @@ def test_viewer_mouse_orbits_pans_zooms_and_ends_on_the_full_frame(tmp_path):
         v._image_event({"type": "wheel", "dx": 0, "dy": -100, "x": 5, "y": 5})
         assert _dist(v.model.camera) == pytest.approx(d0 / 1.1)
         assert v.loop.wait_idle(10)
-        assert v._image_frame().shape == (60, 80, 3) and "full" in v.status.value
+        assert v.canvas.sent[-1].shape == (60, 80, 3) and "full" in v.status.value
         assert v.model.renderer.calls[-1]["camera"] == v.model.camera
     finally:
         v.close()
@@ -610,6 +698,65 @@ def test_histogram_edits_click_drag_double_click_and_rebuild_little(tmp_path, mo
         v.close()
 
 
+def test_a_control_echoing_its_value_back_draws_nothing(tmp_path):
+    """The browser sends the unit-distance slider's value back through log10 and 10**x, one
+    ulp off: a viewer shown and left alone draws its full frame once, not a preview and a
+    second full frame. A real change still draws."""
+    v = _viewer(tmp_path, SlowRenderer(0.0), settle_s=0.05)
+    try:
+        assert v.loop.wait_idle(10) and v.loop.frames == 1
+        u, (lo, hi) = v.model.editor.unit_distance, v.model.editor.scalar_range
+        v.unit.value = float(np.nextafter(u, np.inf))  # the slider's echo
+        v.lo.value = float(np.nextafter(lo, -np.inf))  # a text box's, should one round
+        time.sleep(0.2)
+        assert v.loop.wait_idle(10) and v.loop.frames == 1 and v.loop.revision == 1
+        assert v.model.editor.unit_distance == u and v.model.editor.scalar_range == (lo, hi)
+        v.unit.value = 2 * u
+        assert v.loop.wait_idle(10) and v.loop.frames > 1 and v.model.editor.unit_distance == 2 * u
+    finally:
+        v.close()
+
+
+def test_nothing_is_sent_before_the_page_shows_a_view(tmp_path):
+    pytest.importorskip("jupyter_rfb", reason="the Jupyter viewer needs jupyter_rfb: pip install -e '.[widget]'")
+    from tetvr.apps.viewer import Viewer
+
+    v = Viewer(_scene(tmp_path), renderer=RecordingRenderer())
+    try:
+        assert v.loop.wait_idle(10) and "sent" not in v.canvas.__dict__  # the page would drop it
+        v.canvas._has_visible_views = True
+        assert len(v.canvas.sent) == 1 and v.canvas.sent[0].shape == (60, 80, 3)
+    finally:
+        v.close()
+
+
+def test_frames_go_out_while_a_cell_keeps_the_kernel_busy(tmp_path):
+    """A viewer made in a running event loop (the kernel's), which a cell then blocks: the
+    frames and the status still go out, two at a time until the browser acknowledges them."""
+    import asyncio
+
+    async def cell():
+        v = _viewer(tmp_path, SlowRenderer(0.0), settle_s=0.0)
+        v.canvas.acks = False
+        try:
+            assert v._kernel_loop is asyncio.get_running_loop()
+            # (the page reported its view before the cell began: a frame sent earlier is lost)
+            # The loop is blocked from here on: this cell neither awaits nor returns.
+            assert v.loop.wait_idle(10) and len(v.canvas.__dict__.get("sent", [])) == 1
+            assert "full 80×60" in v.status.value
+            for k in range(3):
+                v._camera(lambda c: c.azimuth(10.0), final=True)
+                assert v.loop.wait_idle(10)
+            assert len(v.canvas.sent) == 2  # two in flight: the newest waits in the slot ...
+            v.canvas._frame_feedback = {"index": 2, "timestamp": 0.0, "localtime": 0.0}
+            assert len(v.canvas.sent) == 3  # ... until the browser acknowledges them
+            assert v.model.renderer.calls[-1]["camera"] == v.model.camera
+        finally:
+            v.close()
+
+    asyncio.run(cell())
+
+
 def test_viewer_resizes_with_the_page_keeping_the_aspect(tmp_path):
     v = _viewer(tmp_path)
     try:
@@ -617,12 +764,14 @@ def test_viewer_resizes_with_the_page_keeping_the_aspect(tmp_path):
         assert v.canvas.css_height == "32px"  # 40 px wide at 4:3 (+ the 1 px border each side)
         assert v.loop.wait_idle(10) and v.model.size == (80, 60)
         v._image_event({"type": "resize", "width": 200.0, "height": 150.0, "ratio": 1.0})
-        assert v.loop.wait_idle(10) and v.model.size == (200, 150) and v._image_frame().shape == (150, 200, 3)
-        # Each frame goes out once (a second draw request finds nothing new to send) ...
-        assert v._image_frame() is None
+        assert v.loop.wait_idle(10) and v.model.size == (200, 150) and v.canvas.sent[-1].shape == (150, 200, 3)
+        # Each frame goes out once (a second send finds nothing new) ...
+        n = len(v.canvas.sent)
+        v._send()
+        assert len(v.canvas.sent) == n
         # ... except to a new view, which reports its size: it gets the last frame again.
         v._image_event({"type": "resize", "width": 200.0, "height": 150.0, "ratio": 1.0})
-        assert v._image_frame().shape == (150, 200, 3) and v._image_frame() is None
+        assert len(v.canvas.sent) == n + 1 and v.canvas.sent[-1] is v.canvas.sent[-2]
         assert v.canvas.quality == 100  # PNG: no lossless re-send of a preview after it
     finally:
         v.close()

@@ -122,8 +122,15 @@ def start_browser(profile: Path, window: tuple[int, int] = (1280, 1000)) -> tupl
     return driver, stop
 
 
-def open_and_run(driver: Any, url: str, selector: str, timeout: float = 90.0) -> None:
-    """Open a notebook, wait for its kernel, run all cells, wait for ``selector`` to appear."""
+def run_cell(driver: Any, index: int) -> None:
+    """Run the notebook's cell ``index`` (from 0)."""
+    driver.execute_script(f"window.jupyterapp.shell.currentWidget.content.activeCellIndex = {int(index)};"
+                          "window.jupyterapp.commands.execute('notebook:run-cell')")
+
+
+def open_and_run(driver: Any, url: str, selector: str, timeout: float = 90.0, *, all_cells: bool = True) -> None:
+    """Open a notebook, wait for its kernel, run all cells (or the first only), wait for
+    ``selector`` to appear."""
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as ec
     from selenium.webdriver.support.ui import WebDriverWait
@@ -134,5 +141,8 @@ def open_and_run(driver: Any, url: str, selector: str, timeout: float = 90.0) ->
         "const w = window.jupyterapp && window.jupyterapp.shell.currentWidget;"
         "return !!(w && w.sessionContext && w.sessionContext.session && w.sessionContext.session.kernel"
         " && w.sessionContext.session.kernel.connectionStatus === 'connected')"))
-    driver.execute_script("window.jupyterapp.commands.execute('notebook:run-all-cells')")
+    if all_cells:
+        driver.execute_script("window.jupyterapp.commands.execute('notebook:run-all-cells')")
+    else:
+        run_cell(driver, 0)
     WebDriverWait(driver, timeout).until(ec.presence_of_element_located((By.CSS_SELECTOR, selector)))

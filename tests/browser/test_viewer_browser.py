@@ -1,9 +1,12 @@
 """The Jupyter viewer in a real browser: JupyterLab + headless Chromium, checked by pixel hashes.
 
-One notebook shows ``Viewer(post.vtk, size=(480, 360))``; the tests run in order on that page
+One notebook shows ``Viewer(post.vtk, size=(480, 360))`` (then runs the cells of
+``conftest.CELLS``); the tests run in order on that page
 (starting JupyterLab and the kernel once keeps the whole module near half a minute):
 
 * the viewer shows its full frame (480x360 pixels in the page's <img>);
+* a frame asked for while another cell keeps the kernel busy arrives before that cell ends;
+* the controls' echoes of their values draw nothing: two frames drawn in all before any input;
 * a drag orbits and a wheel turn zooms: the picture's hash changes, then the full frame arrives;
 * a click-and-drag on the histogram adds an opacity point: the picture changes, the full frame arrives;
 * a 1 s drag of 30 moves is followed by the full frame within 2 s of mouse-up;
@@ -82,15 +85,59 @@ def _full_and_changed(before):
     return lambda s: _is_full(s) and s["hash"] != before["hash"]
 
 
+# The input prompts ("[*]:" while a cell runs) and the text of each cell's output.
+_CELLS_JS = """
+return Array.from(document.querySelectorAll('.jp-Notebook .jp-Cell')).map(c => [
+    (c.querySelector('.jp-InputPrompt') || {}).textContent || '',
+    (c.querySelector('.jp-OutputArea') || {}).textContent || '']);
+"""
+
+
+def _cells(driver):
+    return driver.execute_script(_CELLS_JS)
+
+
+def _until(what, cond, timeout=60.0, every=0.05):
+    end = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > end:
+            pytest.fail(f"timed out after {timeout:.0f} s waiting for {what}")
+        time.sleep(every)
+
+
 @pytest.fixture(scope="module")
 def page(lab, browser):
-    """The notebook open, its cell run, the viewer's full frame shown."""
-    from tests.browser.lab import open_and_run
+    """The notebook open and the viewer's cell run, its full frame shown; then the cells of
+    ``conftest.CELLS``, one by one: what the page showed while the second kept the kernel
+    busy, and the third's count of the frames drawn. Yields the driver, the first full
+    frame's state and ``run``: ``busy_frame`` (the state of the frame that arrived while the
+    kernel was busy, or None) and ``frames_drawn``."""
+    from tests.browser.lab import open_and_run, run_cell
 
-    open_and_run(browser, lab[0], ".tetvr-image img")
+    open_and_run(browser, lab[0], ".tetvr-image img", all_cells=False)
     assert browser.execute_script(_WATCH_JS)
     first = _wait(browser, "the first full frame", _is_full, timeout=90)
-    return browser, first
+    kernel = "window.jupyterapp.shell.currentWidget.sessionContext.session.kernel.status"
+    _until("the kernel to take the page's messages", lambda: browser.execute_script(f"return {kernel}") == "idle")
+    time.sleep(1.0)
+    run = {"busy_frame": None, "frames_drawn": None}
+    run_cell(browser, 1)
+    _until("the second cell to print 'busy'", lambda: "busy" in _cells(browser)[1][1])
+    before = _state(browser)
+    while "*" in _cells(browser)[1][0]:  # while it runs: the frame it asked for 1 s into it
+        s = _state(browser)
+        if s is not None and _is_full(s) and s["hash"] != before["hash"]:
+            run["busy_frame"] = s
+            break
+        time.sleep(0.05)
+    _until("the second cell to end", lambda: "*" not in _cells(browser)[1][0], timeout=30)
+    run_cell(browser, 2)
+    _until("the third cell's count", lambda: "frames drawn" in _cells(browser)[2][1], timeout=90)
+    run["frames_drawn"] = int(_cells(browser)[2][1].split("frames drawn:")[1].split()[0])
+    # Back to the viewer: a picture scrolled out of view is sent no frames.
+    browser.execute_script("window.jupyterapp.shell.currentWidget.content.activeCellIndex = 0;"
+                           "document.querySelector('.tetvr-image img').scrollIntoView({block: 'start'});")
+    return browser, first, run
 
 
 def _drag(driver, selector, moves, dx, dy, seconds):
@@ -104,16 +151,29 @@ def _drag(driver, selector, moves, dx, dy, seconds):
 
 
 def test_the_viewer_shows_its_full_frame(page):
-    _, first = page
+    _, first, _ = page
     assert (first["nw"], first["nh"]) == SIZE
     assert first["w"] / first["h"] == pytest.approx(4 / 3, rel=0.01)
+
+
+def test_frames_arrive_while_a_cell_keeps_the_kernel_busy(page):
+    # The render thread sends them: the kernel's event loop, which the cell blocks, is not involved.
+    busy = page[2]["busy_frame"]
+    assert busy is not None, "no new frame arrived while the second cell kept the kernel busy"
+    assert (busy["nw"], busy["nh"]) == SIZE
+
+
+def test_the_controls_echoing_their_values_draw_nothing(page):
+    # The first full frame and the one the second cell asked for; the unit-distance slider's
+    # echo of its value (1 ulp off through log10 and 10**x) used to add a preview and a full frame.
+    assert page[2]["frames_drawn"] == 2
 
 
 def test_a_drag_orbits_and_the_wheel_zooms(page):
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
 
-    driver, _ = page
+    driver = page[0]
     before = _state(driver)
     _drag(driver, ".tetvr-image img", 8, 12, 2, 0.3)
     orbited = _wait(driver, "the full frame after the drag", _full_and_changed(before))
@@ -124,7 +184,7 @@ def test_a_drag_orbits_and_the_wheel_zooms(page):
 
 
 def test_a_histogram_edit_changes_the_picture_and_the_full_frame_arrives(page):
-    driver, _ = page
+    driver = page[0]
     before = _state(driver)
     hist_before = _state(driver, ".tetvr-hist")
     # Press on empty space at 40 % of the range, low opacity; drag the new point up.
@@ -140,7 +200,7 @@ def test_a_histogram_edit_changes_the_picture_and_the_full_frame_arrives(page):
 
 
 def test_the_full_frame_follows_a_one_second_drag_within_two_seconds(page):
-    driver, _ = page
+    driver = page[0]
     before = _state(driver)
     driver.execute_script("window.__frames = []; window.__statuses = []; window.__up = null;")
     _drag(driver, ".tetvr-image img", 30, -4, 1, 1.0)
@@ -158,7 +218,7 @@ def test_the_full_frame_follows_a_one_second_drag_within_two_seconds(page):
 
 
 def test_the_layout_keeps_the_aspect_in_an_800px_window(page):
-    driver, _ = page
+    driver = page[0]
     size = driver.get_window_size()
     try:
         before = _state(driver)
@@ -183,7 +243,7 @@ def test_the_saved_notebook_keeps_a_picture(page, lab):
     import base64
     import json
 
-    driver, first = page
+    driver, first, _ = page
     path = lab[1]
     before = path.stat().st_mtime_ns
     driver.execute_script("window.jupyterapp.commands.execute('docmanager:save')")
@@ -209,7 +269,7 @@ def test_the_saved_notebook_keeps_a_picture(page, lab):
 
 
 def test_no_severe_console_errors(page):
-    driver, _ = page
+    driver = page[0]
     severe = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"
               and "favicon" not in e["message"]]
     assert not severe, "\n".join(e["message"] for e in severe)

@@ -292,7 +292,8 @@ class VTKProcess:
     from the camera change to the image read back into numpy, without the transfer
     between processes; :attr:`first_seconds` is the same for the first frame, from the
     window's creation on (it does not count starting Python and importing VTK).
-    :attr:`info` holds the VTK version, window class, mapper class and GL renderer.
+    :attr:`info` holds the VTK version, window class, mapper class and GL renderer, and
+    ``cpu_seconds``, the child's CPU time over the last frame (all its threads).
 
     The child is a fresh interpreter (``python -c``, not ``multiprocessing``, so scripts
     need no ``if __name__ == "__main__"`` guard) that talks over two pipes (POSIX only;
@@ -413,14 +414,14 @@ def _serve(in_fd: int, out_fd: int) -> None:
             msg = inbox.recv()
             if msg is None:
                 break
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             try:
                 image = renderer.render(Camera.from_dict(msg))
             except Exception as exc:
                 outbox.send(("error", f"{type(exc).__name__}: {exc}"))
                 continue
-            seconds = time.perf_counter() - t0
-            outbox.send(("ok", (image, seconds, {"gl_renderer": renderer.gl_renderer,
+            seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+            outbox.send(("ok", (image, seconds, {"gl_renderer": renderer.gl_renderer, "cpu_seconds": cpu,
                                                  "first_frame_renders": renderer.first_frame_renders})))
     except (EOFError, BrokenPipeError):
         pass

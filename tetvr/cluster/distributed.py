@@ -5,12 +5,14 @@ About this technique
 A k-d tree of axis-aligned planes splits the mesh into bricks (the bricks themselves are
 :mod:`tetvr.cluster.bricks`), each worker holds its bricks (:class:`ClusterBricks`) and
 renders them to premultiplied float images with the shared camera, transfer function,
-table and float32 origin, and the client composites them "over" in the tree's visibility
-order. A mesh held here is split here and its bricks sent (:func:`distribute_mesh`); a
-mesh in solver pieces (a ``.pvtu``) is read and redistributed into bricks on the workers
-(:func:`distribute_pieces`), the client holding only a sample of its cells. The cluster is
-``dask.distributed``'s (:func:`tetvr.cluster.workers.cluster_client`); a time series is
-rendered one task per step by :mod:`tetvr.cluster.timeseries`.
+table and float32 origin, and the workers composite them "over" in the tree's visibility
+order (radix-k, :mod:`tetvr.cluster.compositing`), so that the client receives one image.
+A mesh held here is split here and its bricks sent (:func:`distribute_mesh`); a mesh in
+solver pieces (a ``.pvtu``) is read and redistributed into bricks on the workers
+(:func:`distribute_pieces`: each piece's bytes sent from here, or fetched by the workers
+from a URL, :mod:`tetvr.cluster.inputs`), the client holding only a sample of its cells.
+The cluster is ``dask.distributed``'s (:func:`tetvr.cluster.workers.cluster_client`); a
+time series is rendered one task per step by :mod:`tetvr.cluster.timeseries`.
 
 Where the composite is exact, and what it costs: ``docs/distributed.md``.
 """
@@ -29,6 +31,8 @@ from numpy.typing import NDArray
 
 from tetvr.cluster.bricks import (Brick, BrickTree, Part, Split, Whole, _check_n_bricks, clip_to_box, composite_over, kd_bricks,
                                   leaf_boxes, leaf_paths, merge_parts, part_mesh, plan_bricks, select_cells, visibility_order)
+from tetvr.cluster.compositing import composite_on_workers, final_regions, runs, stitch, subtree_owners
+from tetvr.cluster.inputs import Files, is_url, local_files, materialised, read_error, url_files, url_leaf_files
 from tetvr.cluster.workers import cluster_client, gather, wait, wait_for_workers, worker_renderer
 from tetvr.core.camera import Camera, resolve_clipping_range
 from tetvr.core.image import image_size
@@ -36,10 +40,14 @@ from tetvr.mesh.tetmesh import TetMesh
 from tetvr.optics.transfer import TransferFunction
 from tetvr.settings import RenderSettings
 
-__all__ = ["ClusterBricks", "distribute_mesh", "distribute_pieces", "render_bricks", "render_pieces",
+__all__ = ["ClusterBricks", "COMPOSITE", "distribute_mesh", "distribute_pieces", "render_bricks", "render_pieces",
            # the bricks themselves (tetvr.cluster.bricks), here too for one import
            "Brick", "BrickTree", "Split", "Whole", "kd_bricks", "visibility_order", "composite_over"]
 
+
+#: Where :meth:`ClusterBricks.render` composites: on the workers (radix-k; the client
+#: receives one image) or on the client (every brick's image comes to it).
+COMPOSITE = ("workers", "client")
 
 
 # ---- sort-last bricks ----
@@ -54,6 +62,22 @@ def _render_brick(brick: TetMesh, index: int, labels: dict[int, str], camera: Ca
         raise RuntimeError(f"brick {index} ({label}) could not be rendered: {exc}") from exc
 
 
+def _render_run(labels: dict[int, str], camera: Camera, tf: TransferFunction, size: tuple[int, int],
+                settings: RenderSettings, indices: list[int], *bricks: TetMesh) -> NDArray[np.float32]:
+    """Bricks consecutive in visibility order (front first), all held by this worker,
+    rendered one at a time and composited "over" as they come (in float64, as
+    :func:`tetvr.cluster.bricks.composite_over`)."""
+    out: NDArray[np.float64] | None = None
+    for index, brick in zip(indices, bricks):
+        image = _render_brick(brick, index, labels, camera, tf, size, settings)
+        if out is None:
+            out = image.astype(np.float64)
+        else:
+            out += (1.0 - out[..., 3:4]) * image
+    assert out is not None
+    return out.astype(np.float32)
+
+
 def _brick_facts(brick: TetMesh, index: int) -> tuple[int, bool]:
     """A brick's cell count and whether it is tangled (folded faces), which "auto" reads."""
     from tetvr.mesh.records import folded_faces
@@ -63,8 +87,8 @@ def _brick_facts(brick: TetMesh, index: int) -> tuple[int, bool]:
 
 class ClusterBricks:
     """One mesh as k-d bricks (:mod:`tetvr.cluster.bricks`) held by a cluster's workers, each
-    worker only its bricks; :meth:`render` renders a view on the workers and composites
-    it on the client. Made by :func:`distribute_mesh` or :func:`distribute_pieces`.
+    worker only its bricks; :meth:`render` renders a view and composites it on the
+    workers. Made by :func:`distribute_mesh` or :func:`distribute_pieces`.
 
     Attributes
     ----------
@@ -90,20 +114,25 @@ class ClusterBricks:
         # which Dask cannot recompute); None where Dask recomputes it from its tasks.
         self._remake = remake
 
-    def _on_bricks(self, fn: Callable[..., Any], *args: Any, what: str) -> dict[int, Any]:
-        """``fn(brick, index, *args)`` run on each brick's worker: the results by brick.
+    def _run(self, tasks: Callable[[dict[int, Any]], list[Any]], what: str) -> list[Any]:
+        """The results of the futures ``tasks(bricks)`` submits from the bricks' futures.
         Bricks whose worker died are remade first, and again (twice at most) where a worker
         dies under the tasks and takes its bricks with it (the tasks are cancelled)."""
-        c = self.client
         for attempt in range(3):
             self._replace_lost(ask=attempt > 0)
-            futures = {i: c.submit(fn, f, i, *args, pure=False) for i, f in self.futures.items()}
+            futures = tasks(dict(self.futures))
             try:
-                return dict(zip(futures, gather(c, list(futures.values()), what)))
+                return gather(self.client, futures, what)
             except CancelledError:
                 if self._remake is None or attempt == 2:
                     raise
         raise AssertionError("unreachable")  # pragma: no cover
+
+    def _on_bricks(self, fn: Callable[..., Any], *args: Any, what: str) -> dict[int, Any]:
+        """``fn(brick, index, *args)`` run on each brick's worker: the results by brick."""
+        order = sorted(self.futures)
+        got = self._run(lambda bricks: [self.client.submit(fn, bricks[i], i, *args, pure=False) for i in order], what)
+        return dict(zip(order, got))
 
     def _facts(self) -> None:
         # Counted and checked on the workers, where the bricks are.
@@ -149,13 +178,48 @@ class ClusterBricks:
         return dataclasses.replace(settings, method=method)  # type: ignore[arg-type]
 
     def render(self, camera: Camera, tf: TransferFunction, *, size: tuple[int, int] = (512, 512),
-               settings: RenderSettings | None = None) -> NDArray[np.float32]:
-        """The (height, width, 4) premultiplied float32 image of the whole mesh."""
+               settings: RenderSettings | None = None, composite: str = "workers") -> NDArray[np.float32]:
+        """The (height, width, 4) premultiplied float32 image of the whole mesh.
+
+        ``composite`` (:data:`COMPOSITE`): ``"workers"`` composites the bricks' images on
+        the workers, "over" in the k-d tree's visibility order for this view, by radix-k
+        (:mod:`tetvr.cluster.compositing`), each worker's bricks that are consecutive in
+        that order first composited where they are: the client receives one image.
+        ``"client"`` brings every brick's full image here and composites them in order
+        (:func:`tetvr.cluster.bricks.composite_over`): P images received. The two differ
+        by float32 rounding (under 1e-6).
+        """
         size = image_size(size)
+        if composite not in COMPOSITE:
+            raise ValueError(f"composite must be one of {COMPOSITE}, got {composite!r}")
         camera = resolve_clipping_range(camera, self.whole.bounds)  # one range for every brick: the whole mesh's
         settings = self.settings_for(settings or RenderSettings(), camera, size)
-        images = self._on_bricks(_render_brick, self.labels, camera, tf, size, settings, what="rendering the bricks")
-        return composite_over([images[i] for i in visibility_order(self.root, camera)])
+        order = visibility_order(self.root, camera)
+        c = self.client
+        n_pixels = size[0] * size[1]
+
+        n_runs = [0]
+
+        def tasks(bricks: dict[int, Any]) -> list[Any]:
+            if composite == "client":
+                return [c.submit(_render_brick, bricks[i], i, self.labels, camera, tf, size, settings, pure=False)
+                        for i in order]
+            # Bricks consecutive in this view's order and held by one worker render and
+            # composite there as one run; radix-k then composites the runs across workers.
+            held = c.who_has([bricks[i] for i in order])
+            owners = [next(iter(held.get(bricks[i].key) or ()), None) for i in order]
+            groups = runs(owners)
+            where = [owners[g[0]] for g in groups]
+            images = [c.submit(_render_run, self.labels, camera, tf, size, settings, [order[s] for s in g],
+                               *[bricks[order[s]] for s in g], pure=False, workers=None if w is None else [w],
+                               allow_other_workers=True) for g, w in zip(groups, where)]
+            n_runs[0] = len(groups)
+            return composite_on_workers(c, images, n_pixels, workers=where)[0]
+
+        parts = self._run(tasks, "rendering the bricks")
+        if composite == "client":
+            return composite_over(parts)
+        return stitch(parts, final_regions(n_runs[0], n_pixels), size[1], size[0])
 
     def _replace_lost(self, ask: bool = False) -> None:
         """Scatter again the bricks whose workers died (scattered data is lost with them):
@@ -182,12 +246,15 @@ def distribute_mesh(mesh: TetMesh, n_bricks: int, client: Any, *, tree: BrickTre
     """Split ``mesh`` (held here) into ``n_bricks`` k-d bricks (:func:`tetvr.cluster.bricks.kd_bricks`)
     and hand them to the workers of ``client`` (a ``distributed.Client``).
 
-    Each brick is scattered to one worker, in turn (``client.scatter``: straight to the
-    worker unless the client was made with ``direct_to_workers=False``, then through the
-    scheduler, which forwards it). No brick travels inside a task, so the scheduler holds
-    only their keys, never the mesh. A worker that dies takes its bricks with it: the
-    next :meth:`ClusterBricks.render` makes them again here from the k-d tree, which the
-    client keeps, and scatters them to the workers left.
+    Each brick is scattered to one worker (``client.scatter``: straight to the worker
+    unless the client was made with ``direct_to_workers=False``, then through the
+    scheduler, which forwards it), each worker's bricks one subtree of the k-d tree
+    (:func:`tetvr.cluster.compositing.subtree_owners`): they are consecutive in every
+    view's order, so they are composited where they are before any image travels. No
+    brick travels inside a task, so the scheduler holds only their keys, never the mesh.
+    A worker that dies takes its bricks with it: the next :meth:`ClusterBricks.render`
+    makes them again here from the k-d tree, which the client keeps, and scatters them to
+    the workers left.
     """
     tree = tree if tree is not None else kd_bricks(mesh, n_bricks)
     if tree.mesh is not mesh:
@@ -200,15 +267,18 @@ def distribute_mesh(mesh: TetMesh, n_bricks: int, client: Any, *, tree: BrickTre
     by_index = {b.index: b for b in tree.bricks()}
     direct = True if client.direct_to_workers is None else bool(client.direct_to_workers)
     counts: dict[int, int] = {}
-    turn = itertools.count()  # the workers in turn
+    turn = itertools.count()  # a brick made again: to the workers left, in turn
+    first = wait_for_workers(client, "handing the bricks to the workers")
+    owner = subtree_owners(tree.root, len(first))
 
-    def scatter(i: int) -> Any:
+    def scatter(i: int, at: str | None = None) -> Any:
         workers = wait_for_workers(client, f"handing brick {i} to the workers")
         brick = tree.brick_mesh(by_index[i])  # made here one at a time, dropped once sent
         counts[i] = brick.n_tets
-        return client.scatter(brick, workers=[workers[next(turn) % len(workers)]], direct=direct, hash=False)
+        address = at if at is not None else workers[next(turn) % len(workers)]
+        return client.scatter(brick, workers=[address], direct=direct, hash=False)
 
-    futures = {i: scatter(i) for i in sorted(by_index)}
+    futures = {i: scatter(i, first[owner[i]]) for i in sorted(by_index)}
     labels = {i: f"{n_bricks} k-d bricks of the mesh" for i in futures}
     return ClusterBricks(client, futures, tree.root, tree.whole, labels, brick_tets=counts, remake=scatter)
 
@@ -225,7 +295,7 @@ def render_bricks(
     tree: BrickTree | None = None,
 ) -> NDArray[np.float32]:
     """Render ``mesh`` as ``n_bricks`` k-d bricks (:func:`tetvr.cluster.bricks.kd_bricks`) on the
-    cluster's workers and composite them "over" on the client in visibility order. For
+    cluster's workers and composite them "over" there in visibility order. For
     several views, keep the bricks on the workers: :func:`distribute_mesh`.
 
     Returns the (height, width, 4) premultiplied float32 image.
@@ -244,13 +314,31 @@ def render_bricks(
 
 # ---- solver pieces, redistributed into k-d bricks on the workers ----
 
-def _read_piece(path: str, scalars: str | None, component: int | None) -> TetMesh:
+def _read_piece(files: Files, scalars: str | None, component: int | None) -> TetMesh:
     from tetvr.io.meshfile import read
 
-    try:
-        return read(path, scalars, component=component)
-    except Exception as exc:
-        raise ValueError(f"piece {path!r} could not be read: {exc}") from exc
+    with materialised(files) as path:
+        try:
+            return read(path, scalars, component=component)
+        except Exception as exc:
+            raise ValueError(read_error(exc, files, path, "piece")) from exc
+
+
+def _piece_sender(client: Any) -> Callable[[str], Any]:
+    """``send(name)``: what a worker reads a piece from. A URL is fetched by the worker; a
+    path's bytes are read here and handed to the workers in turn (``client.scatter``, as
+    :func:`distribute_mesh` hands its bricks), one piece at a time."""
+    workers = wait_for_workers(client, "handing the pieces to the workers")
+    direct = True if client.direct_to_workers is None else bool(client.direct_to_workers)
+    turn = itertools.count()
+
+    def send(name: str) -> Any:
+        if is_url(name):
+            return url_files(name)
+        return client.scatter(local_files(name, "piece"), workers=[workers[next(turn) % len(workers)]],
+                              direct=direct, hash=False)
+
+    return send
 
 
 def _piece_summary(piece: TetMesh, n_segments: int) -> dict[str, Any]:
@@ -290,17 +378,46 @@ def _combined_sample(summaries: list[dict[str, Any]]) -> Any:
                          length=np.concatenate([g.length for g in segs]), weight=w / w.sum())
 
 
+def _piece_names(pieces: Any) -> list[str]:
+    """The files of ``pieces``: a collection's (a path's listed here, a URL's from its XML),
+    or the list given."""
+    from tetvr.io.collections import pieces as piece_files
+
+    if isinstance(pieces, (str, os.PathLike)):
+        name = os.fspath(pieces)
+        files = url_leaf_files(name) if is_url(name) else piece_files(name)
+    else:
+        files = [os.fspath(f) for f in pieces]
+    if not files:
+        raise ValueError("no pieces given")
+    return files
+
+
+def _whole_of(summaries: list[dict[str, Any]]) -> Whole:
+    """What the bricks share with the whole mesh, from its pieces' summaries."""
+    bounds = np.stack([np.min([s["bounds"][0] for s in summaries], axis=0),
+                       np.max([s["bounds"][1] for s in summaries], axis=0)])
+    return Whole(bounds=bounds, float32_origin=bounds.mean(axis=0),
+                 scalar_range=(min(s["scalar_range"][0] for s in summaries),
+                               max(s["scalar_range"][1] for s in summaries)),
+                 max_edge=max(s["max_edge"] for s in summaries), segment_sample=_combined_sample(summaries),
+                 n_tets=sum(s["n_tets"] for s in summaries))
+
+
 def distribute_pieces(pieces: Any, n_bricks: int, client: Any, *, scalars: str | None = None,
                       component: int | None = None, sample: int = 20_000) -> ClusterBricks:
     """Read a mesh's solver pieces on the workers and redistribute them into ``n_bricks``
     k-d bricks there; the client holds only a sample of the cells.
 
     ``pieces``: a ``.pvtu`` (or ``.vtm``) file, or a list of mesh files that together make
-    one mesh (points on the pieces' shared faces with equal coordinates are joined). Solver
+    one mesh (points on the pieces' shared faces with equal coordinates are joined). A path
+    names files here: each piece is read here, one at a time, and its bytes sent to a
+    worker; a URL (``s3://...``, ``file:///shared/...``) names files the workers fetch
+    themselves (:mod:`tetvr.cluster.inputs`). Solver
     partitions are not convex and cannot be ordered as wholes; the bricks are boxes
     (ParaView's ``vtkRedistributeDataSet`` before IceT does the same).
 
-    1. each piece is read on a worker (a piece that cannot be read fails naming its file);
+    1. each piece is parsed on a worker (a piece that cannot be read fails naming its file);
        its summary (bounds, scalar range, longest edge, a segment sample) and a sample of
        ``sample`` cells in all, drawn evenly, come back;
     2. the k-d planes are chosen on the sample (:func:`tetvr.cluster.bricks.plan_bricks`);
@@ -313,16 +430,11 @@ def distribute_pieces(pieces: Any, n_bricks: int, client: Any, *, scalars: str |
     ...     bricks = distribute_pieces("run_0042.pvtu", 8, c)
     ...     image = bricks.render(camera, tf, size=(1024, 1024))
     """
-    from tetvr.io.collections import pieces as piece_files
     from tetvr.optics.tablesize import _N_SEGMENTS
 
-    if isinstance(pieces, (str, os.PathLike)):
-        files = [os.path.abspath(f) for f in piece_files(pieces)]
-    else:
-        files = [os.path.abspath(os.fspath(f)) for f in pieces]
-    if not files:
-        raise ValueError("no pieces given")
-    read = [client.submit(_read_piece, f, scalars, component, pure=False) for f in files]
+    files = _piece_names(pieces)
+    send = _piece_sender(client)
+    read = [client.submit(_read_piece, send(f), scalars, component, pure=False) for f in files]
     per_piece = max(256, _N_SEGMENTS // len(files))
     summaries = gather(client, [client.submit(_piece_summary, r, per_piece, pure=False) for r in read],
                        "reading the pieces")
@@ -336,26 +448,33 @@ def distribute_pieces(pieces: Any, n_bricks: int, client: Any, *, scalars: str |
     corners = np.concatenate(gather(client, [
         client.submit(_piece_sample, r, max(1, -(-sample * s["n_tets"] // total)), pure=False)
         for r, s in zip(read, summaries)], "sampling the pieces"))
-    bounds = np.stack([np.min([s["bounds"][0] for s in summaries], axis=0),
-                       np.max([s["bounds"][1] for s in summaries], axis=0)])
-    whole = Whole(bounds=bounds, float32_origin=bounds.mean(axis=0),
-                  scalar_range=(min(s["scalar_range"][0] for s in summaries),
-                                max(s["scalar_range"][1] for s in summaries)),
-                  max_edge=max(s["max_edge"] for s in summaries), segment_sample=_combined_sample(summaries),
-                  n_tets=total)
+    whole = _whole_of(summaries)
     root = plan_bricks(corners, n_bricks)
-    boxes = leaf_boxes(root, bounds)
+    boxes = leaf_boxes(root, whole.bounds)
     paths = leaf_paths(root)
     name = summaries[0]["scalar_name"]
-    futures, labels = {}, {}
-    for i, box in boxes.items():
-        # A piece's cells may overlap the box's bounds but not its inside: such a piece
-        # sends nothing useful, and is named anyway (the label says where cells came from).
-        pieces_in = [k for k, s in enumerate(summaries)
+    # A piece's cells may overlap the box's bounds but not its inside: such a piece sends
+    # nothing useful, and is named anyway (the label says where cells came from).
+    pieces_in = {i: [k for k, s in enumerate(summaries)
                      if np.all(s["bounds"][0] < box[1]) and np.all(s["bounds"][1] > box[0])]
-        labels[i] = "pieces " + ", ".join(os.path.basename(files[k]) for k in pieces_in)
-        parts = [client.submit(_piece_part, read[k], box, pure=False) for k in pieces_in]
-        futures[i] = client.submit(_assemble_brick, i, labels[i], paths[i], whole, name, *parts, pure=False)
+                 for i, box in boxes.items()}
+    labels = {i: "pieces " + ", ".join(os.path.basename(files[k]) for k in ks) for i, ks in pieces_in.items()}
+
+    workers = wait_for_workers(client, "making the bricks")
+    owner = subtree_owners(root, len(workers))  # each worker one subtree of bricks
+
+    def make(i: int, read: dict[int, Any], at: str | None = None) -> Any:
+        parts = [client.submit(_piece_part, read[k], boxes[i], pure=False) for k in pieces_in[i]]
+        return client.submit(_assemble_brick, i, labels[i], paths[i], whole, name, *parts, pure=False,
+                             workers=None if at is None else [at], allow_other_workers=True)
+
+    def remake(i: int) -> Any:
+        # A brick lost with its worker, whose pieces' bytes are gone too: read and sent again.
+        again = _piece_sender(client)
+        return make(i, {k: client.submit(_read_piece, again(files[k]), scalars, component, pure=False)
+                        for k in pieces_in[i]})
+
+    futures = {i: make(i, dict(enumerate(read)), workers[owner[i]]) for i in boxes}
     # Made (and any error raised, naming its piece) before the pieces go; waited for, not
     # gathered: the bricks stay on the workers.
     wait(client, list(futures.values()), "making the bricks")
@@ -363,7 +482,7 @@ def distribute_pieces(pieces: Any, n_bricks: int, client: Any, *, scalars: str |
         if f.status == "error":
             f.result()
     del read
-    return ClusterBricks(client, futures, root, whole, labels)
+    return ClusterBricks(client, futures, root, whole, labels, remake=remake)
 
 
 def render_pieces(

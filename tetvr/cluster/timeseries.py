@@ -2,25 +2,30 @@
 
 About this technique
 --------------------
-Each worker reads its own step (the client never loads the meshes) and renders it with
-the one :class:`~tetvr.gl.Renderer` that worker keeps for the run
+Each step is read on the worker that renders it (the client never parses the meshes) and
+rendered with the one :class:`~tetvr.gl.Renderer` that worker keeps for the run
 (:func:`tetvr.cluster.workers.worker_renderer`). The renderer is a pure function of (mesh,
 camera, transfer function, settings), so a frame is the same bits wherever it was
 rendered. A step is a mesh, a mesh file, a step of a ``.pvd`` collection or of an XDMF
 time series (:func:`series_sources`); the cluster is ``dask.distributed``'s
-(:func:`tetvr.cluster.workers.cluster_client`). Measured speed-ups: ``docs/distributed.md``.
+(:func:`tetvr.cluster.workers.cluster_client`). No file system is shared
+(:mod:`tetvr.cluster.inputs`): a step named by a path is read here as bytes and sent to its
+worker, one named by a URL the worker fetches; PNG frames come back to be written here, or
+go to the URL given. Measured speed-ups: ``docs/distributed.md``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
-from typing import Any, Union
+from typing import Any, Callable, Iterator, Union
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tetvr.cluster.workers import as_completed, cluster_client, gather, worker_renderer
+from tetvr.cluster.inputs import (Files, fetch_bytes, is_url, local_files, materialised, named_error, url_files,
+                                  url_glob, url_leaf_files, url_pvd_steps, write_bytes)
+from tetvr.cluster.workers import cluster_client, worker_renderer
 from tetvr.core.camera import Camera
 from tetvr.core.image import image_size
 from tetvr.core.outputs import check_outputs, check_writable
@@ -30,7 +35,7 @@ from tetvr.settings import RenderSettings
 
 __all__ = ["Source", "animate_series", "render_series", "series_sources"]
 
-# A step: a mesh, a mesh file, (a .pvd, a step index) or ("xdmf", an XDMF file, a step index).
+# A step: a mesh, a mesh file (a path or URL), (a .pvd, a step index) or ("xdmf", an XDMF file, a step index).
 Source = Union[TetMesh, str, tuple[str, int], tuple[str, str, int]]
 _XDMF = (".xdmf", ".xmf")
 _GLOB = ("*", "?", "[")
@@ -40,43 +45,52 @@ _GLOB = ("*", "?", "[")
 class _Step:
     source: Source
     time: float
+    parts: tuple[str, ...] = ()  # a .pvd step's files
 
 
 def series_sources(steps: Any) -> list[_Step]:
-    """The steps of a series: a ``.pvd`` path or :class:`~tetvr.io.collections.Collection`
-    (its times), an XDMF time series (its times), a glob pattern (``"run/step_*.vtu"``,
-    the files in natural order: ``s2`` before ``s10``), or a sequence of meshes or mesh
-    files (time = index). Only the collection's own file is read here, never a mesh."""
+    """The steps of a series: a ``.pvd`` path or URL, or a
+    :class:`~tetvr.io.collections.Collection` (its times), an XDMF time series (its times),
+    a glob pattern (``"run/step_*.vtu"``, ``"s3://bucket/run/step_*.vtu"``: the files in
+    natural order, ``s2`` before ``s10``), or a sequence of meshes, mesh files or URLs
+    (time = index). Only the collection's own file is read here, never a mesh."""
     from tetvr.io.collections import Collection, read_pvd
 
     if isinstance(steps, (str, os.PathLike)):
         name = os.fspath(steps)
+        url = is_url(name)
         if name.lower().endswith(".pvd"):
+            if url:
+                return [_Step((name, i), t, tuple(parts)) for i, (t, parts) in enumerate(url_pvd_steps(name))]
             steps = read_pvd(name)
         elif name.lower().endswith(_XDMF):
-            return [_Step(("xdmf", os.path.abspath(name), k), t) for k, t in enumerate(_xdmf_times(name))]
-        elif any(ch in name for ch in _GLOB) and not os.path.exists(name):
+            where = name if url else os.path.abspath(name)
+            return [_Step(("xdmf", where, k), t) for k, t in enumerate(_xdmf_times(name))]
+        elif any(ch in name for ch in _GLOB) and (url or not os.path.exists(name)):
             import glob
 
-            steps = sorted(glob.glob(name), key=_natural_key)
+            steps = sorted(url_glob(name) if url else glob.glob(name), key=_natural_key)
             if not steps:
                 raise FileNotFoundError(f"no file matches {name!r}")
     if isinstance(steps, Collection):
-        return [_Step((steps.path, i), t) for i, t in enumerate(steps.times)]
+        return [_Step((steps.path, i), s.time, s.files) for i, s in enumerate(steps.steps)]
     if isinstance(steps, (str, os.PathLike, TetMesh)):
         steps = [steps]
     out = []
     for i, s in enumerate(steps):
         if not isinstance(s, (TetMesh, str, os.PathLike)):
-            raise TypeError(f"step {i} must be a TetMesh or a mesh file, got {type(s).__name__}")
-        out.append(_Step(s if isinstance(s, TetMesh) else os.path.abspath(os.fspath(s)), float(i)))
+            raise TypeError(f"step {i} must be a TetMesh, a mesh file or a URL, got {type(s).__name__}")
+        if isinstance(s, TetMesh):
+            out.append(_Step(s, float(i)))
+        else:
+            out.append(_Step(os.fspath(s), float(i)))  # a path: read here, where it is relative to
     if not out:
         raise ValueError("the series is empty: give at least one mesh or file")
     return out
 
 
 def _step_inputs(items: list[_Step]) -> list[tuple[str, str]]:
-    """``(what, path)`` for every file the steps read: what no frame may be written over."""
+    """``(what, path)`` for every local file the steps read: what no frame may be written over."""
     from tetvr.io.collections import read_pvd
     from tetvr.io.series import series_input_paths, xdmf_data_files
 
@@ -84,7 +98,7 @@ def _step_inputs(items: list[_Step]) -> list[tuple[str, str]]:
     seen: set[str] = set()
     for step in items:
         src = step.source
-        if isinstance(src, TetMesh):
+        if isinstance(src, TetMesh) or is_url(src if isinstance(src, str) else str(src[-2])):
             continue
         if isinstance(src, tuple):  # a step of a .pvd or of an XDMF time series: its files, once
             path = str(src[1] if len(src) == 3 else src[0])
@@ -103,18 +117,100 @@ def _natural_key(name: str) -> list[Any]:
     return [int(p) if p.isdigit() else p for p in re.split(r"(\d+)", name)]
 
 
-def _xdmf_times(path: str) -> list[float]:
-    """The time values of an XDMF time series (its XML only, no data)."""
+def _xdmf_times(name: str) -> list[float]:
+    """The time values of an XDMF time series (its XML only, no data; a URL's fetched here)."""
+    import tempfile
+
     import meshio
 
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"time series not found: {path}")
-    reader = meshio.xdmf.TimeSeriesReader(path)
+    if is_url(name):
+        with tempfile.TemporaryDirectory(prefix="tetvr-") as tmp:
+            local = os.path.join(tmp, "series.xdmf")
+            with open(local, "wb") as f:
+                f.write(fetch_bytes(name))
+            return _xdmf_times(local)
+    if not os.path.isfile(name):
+        raise FileNotFoundError(f"time series not found: {name}")
+    reader = meshio.xdmf.TimeSeriesReader(name)
     times = []
     for k, grid in enumerate(reader.collection):
         t = grid.find("Time")
         times.append(float(t.get("Value")) if t is not None and t.get("Value") is not None else float(k))
     return times
+
+
+def _xdmf_data_urls(url: str) -> list[str]:
+    """The URLs of the HDF5 files an XDMF file at ``url`` names (beside it)."""
+    import posixpath
+    import tempfile
+
+    from tetvr.io.series import xdmf_data_files
+
+    with tempfile.TemporaryDirectory(prefix="tetvr-") as tmp:
+        local = os.path.join(tmp, "series.xdmf")
+        with open(local, "wb") as f:
+            f.write(fetch_bytes(url))
+        names = [os.path.relpath(p, tmp).replace(os.sep, "/") for p in xdmf_data_files(local)]
+    head, _, path = url.rpartition("://")
+    return [f"{head}://{posixpath.normpath(posixpath.join(posixpath.dirname(path), n))}" for n in names]
+
+
+def _one_step_pvd(pvd: str, step: _Step, relpath: Callable[[str, str], str]) -> bytes:
+    """A ``.pvd`` of ``step`` alone (its parts named relative to ``pvd``'s folder): what
+    its worker reads, as the serial reader reads the step from the whole collection."""
+    from xml.sax.saxutils import quoteattr
+
+    folder = os.path.dirname(pvd) if not is_url(pvd) else pvd.rsplit("/", 1)[0]
+    rows = "".join(f"<DataSet timestep={quoteattr(repr(step.time))} part=\"{k}\" "
+                   f"file={quoteattr(relpath(p, folder))}/>" for k, p in enumerate(step.parts))
+    return f'<?xml version="1.0"?><VTKFile type="Collection"><Collection>{rows}</Collection></VTKFile>'.encode()
+
+
+def _step_files(step: _Step) -> tuple[Files | TetMesh, str, int]:
+    """What the worker of ``step`` reads (a path's files read here as bytes; a URL's left
+    to the worker), how (``"mesh"``, ``"pvd"``, ``"xdmf"``), and the step index in it."""
+    import posixpath
+
+    from tetvr.io.collections import is_collection, leaf_files
+    from tetvr.io.series import xdmf_data_files
+
+    src = step.source
+    if isinstance(src, TetMesh):
+        return src, "mesh", 0
+    if isinstance(src, tuple) and len(src) == 3:
+        path = str(src[1])
+        if is_url(path):
+            return url_files(path, _xdmf_data_urls(path)), "xdmf", int(src[2])
+        return local_files(path, "time-series file", xdmf_data_files(path)), "xdmf", int(src[2])
+    if isinstance(src, tuple):
+        pvd = str(src[0])
+        if is_url(pvd):
+            rel = lambda p, folder: posixpath.relpath(p.rpartition("://")[2], folder.rpartition("://")[2])  # noqa: E731
+            return url_files(pvd, step.parts, sent={pvd: _one_step_pvd(pvd, step, rel)}), "pvd", 0
+        files = [g for p in step.parts for g in ([p] + (leaf_files(p) if is_collection(p) else []))]
+        return (local_files(pvd, "collection file", files, replace={pvd: _one_step_pvd(pvd, step, os.path.relpath)}),
+                "pvd", 0)
+    if is_url(src):
+        return url_files(src, url_leaf_files(src) if is_collection(src) else ()), "mesh", 0
+    return local_files(src, "mesh file", leaf_files(src) if is_collection(src) else ()), "mesh", 0
+
+
+def _load(source: Files | TetMesh, kind: str, index: int, scalars: str | None, component: int | None) -> TetMesh:
+    """The step's mesh, read on this worker (:func:`tetvr.cluster.inputs.materialised`)."""
+    from tetvr.io.meshfile import read
+    from tetvr.io.series import read_step
+
+    if isinstance(source, TetMesh):
+        return source
+    with materialised(source) as path:
+        try:
+            if kind == "xdmf":
+                return _read_xdmf_step(path, index, scalars, component)
+            if kind == "pvd":
+                return read_step(path, index, scalars, component=component)
+            return read(path, scalars, component=component)
+        except Exception as exc:
+            raise named_error(exc, source, path, "step") from exc
 
 
 def _read_xdmf_step(path: str, k: int, scalars: str | None, component: int | None) -> TetMesh:
@@ -129,40 +225,31 @@ def _read_xdmf_step(path: str, k: int, scalars: str | None, component: int | Non
     return next(itertools.islice(_read_xdmf_series(Path(path), scalars, component), k, None))[1]
 
 
-def _load(source: Source, scalars: str | None, component: int | None) -> TetMesh:
-    from tetvr.io.series import read_step
-    from tetvr.io.meshfile import read
-
-    if isinstance(source, TetMesh):
-        return source
-    if isinstance(source, tuple) and len(source) == 3:
-        return _read_xdmf_step(str(source[1]), int(source[2]), scalars, component)
-    if isinstance(source, tuple):
-        return read_step(str(source[0]), int(source[1]), scalars, component=component)
-    return read(source, scalars, component=component)
-
-
-def _summary(source: Source, scalars: str | None, component: int | None) -> tuple[NDArray[np.float64], tuple[float, float]]:
-    m = _load(source, scalars, component)
+def _summary(source: Files | TetMesh, kind: str, index: int, scalars: str | None, component: int | None
+             ) -> tuple[NDArray[np.float64], tuple[float, float]]:
+    m = _load(source, kind, index, scalars, component)
     return m.bounds, m.scalar_range
 
 
-def _render_step(source: Source, camera: Camera, tf: TransferFunction, size: tuple[int, int],
-                 settings: RenderSettings, scalars: str | None, component: int | None, output: str | None,
-                 background: tuple[float, float, float] | None) -> Any:
-    mesh = _load(source, scalars, component)
+def _render_step(source: Files | TetMesh, kind: str, index: int, camera: Camera, tf: TransferFunction,
+                 size: tuple[int, int], settings: RenderSettings, scalars: str | None, component: int | None,
+                 png: bool, url: str | None, background: tuple[float, float, float] | None) -> Any:
+    """The step's image; with ``png``, its PNG file: written by this worker to ``url``
+    (which is returned), or its bytes (for the client to write)."""
+    mesh = _load(source, kind, index, scalars, component)
     image = worker_renderer(settings).render(mesh, camera, tf, size=size)
-    if output is None:
+    if not png:
         return image
-    from tetvr.core.image import write_png
+    from tetvr.core.image import png_bytes
 
-    write_png(image, output, background=background)  # atomic: no half-written PNG after a failure
-    return output
+    data = png_bytes(image, background=background)
+    return write_bytes(data, url) if url is not None else data
 
 
 def _frame_names(output: str | os.PathLike[str] | None, items: list[_Step]) -> list[str | None]:
     """Each step's PNG from the ``output`` pattern (None: no files), checked before the
-    cluster starts: one name a step, no frame over a step's file, a folder to write in."""
+    cluster starts: one name a step; for paths (written here), no frame over a step's
+    file and a folder to write in. A URL pattern names files the workers write."""
     if output is None:
         return [None] * len(items)
     pattern = os.fspath(output)
@@ -176,6 +263,8 @@ def _frame_names(output: str | os.PathLike[str] | None, items: list[_Step]) -> l
                          f"(e.g. 'frames/f_{{index:04d}}.png'): {exc!r}") from None
     if len(set(names)) != len(names):
         raise ValueError(f"the output pattern {pattern!r} gives two steps the same file name")
+    if is_url(pattern):
+        return list(names)
     outputs = [(f"frame of step {i}", name) for i, name in enumerate(names)]
     check_outputs(outputs, _step_inputs(items), by="render_series")
     for label, name in outputs:
@@ -188,6 +277,71 @@ class _Bounds:
 
     def __init__(self, bounds: NDArray[np.float64]) -> None:
         self.bounds = bounds
+
+
+def _steps_done(c: Any, items: list[_Step], submit: Callable[[Any, str, int, int], Any], what: str
+                ) -> Iterator[tuple[int, Any]]:
+    """``(step, result)`` of each step as it is done, ``submit(files, kind, index, step)``
+    making its task (see :func:`_step_files`). At most two steps per worker are in flight: a step named by a path
+    is read here (and its bytes sent to a worker) only when its turn comes, so neither
+    the client nor the workers hold the series. A step whose bytes were lost with a
+    worker is sent again (twice at most); a step that fails raises, naming its error."""
+    from concurrent.futures import CancelledError
+
+    from tetvr.cluster.workers import as_completed
+
+    direct = True if c.direct_to_workers is None else bool(c.direct_to_workers)
+    shared: dict[str, Any] = {}  # an XDMF series' files, sent once for all its steps
+    window = max(2, 2 * len(c.nthreads()))
+    todo = list(range(len(items)))[::-1]
+    tries = [0] * len(items)
+    pending: dict[Any, int] = {}
+    while todo or pending:
+        while todo and len(pending) < window:
+            i = todo.pop()
+            src = items[i].source
+            key = str(src[1]) if isinstance(src, tuple) and len(src) == 3 else None
+            if key is not None and key in shared and tries[i] == 0:
+                files, kind, k = shared[key][0], "xdmf", int(src[2])  # type: ignore[index]
+            else:
+                files, kind, k = _step_files(items[i])
+                if isinstance(files, Files) and files.sent:
+                    files = c.scatter(files, direct=direct, hash=False)
+                if key is not None:
+                    shared[key] = (files,)
+            pending[submit(files, kind, k, i)] = i
+        fut = next(as_completed(c, list(pending), what))
+        i = pending.pop(fut)
+        try:
+            result = fut.result()
+        except CancelledError:
+            tries[i] += 1
+            if tries[i] > 2:
+                raise
+            shared.clear()
+            todo.append(i)
+            continue
+        yield i, result
+
+
+def _fitted(c: Any, items: list[_Step], camera: Camera | None, tf: TransferFunction | None, scalars: str | None,
+            component: int | None) -> tuple[Camera, TransferFunction]:
+    """``camera`` and ``tf``, each made where None from the steps' bounds and scalar
+    ranges, reduced on the cluster (a first pass over the steps)."""
+    from tetvr.render import _tf_range
+
+    got = [r for _, r in sorted(_steps_done(
+        c, items, lambda f, kind, k, _: c.submit(_summary, f, kind, k, scalars, component, pure=False),
+        "reading the steps' bounds and ranges"), key=lambda x: x[0])]
+    lo = np.min([b[0] for b, _ in got], axis=0)
+    hi = np.max([b[1] for b, _ in got], axis=0)
+    if camera is None:
+        camera = Camera.fit(_Bounds(np.stack([lo, hi])))  # type: ignore[arg-type]
+    if tf is None:
+        s_lo, s_hi = _tf_range(min(r[0] for _, r in got), max(r[1] for _, r in got))
+        tf = TransferFunction.preset("viridis", (s_lo, s_hi), opacity=0.5,
+                                     unit_distance=default_unit_distance(np.stack([lo, hi])))
+    return camera, tf
 
 
 def render_series(
@@ -208,17 +362,22 @@ def render_series(
 
     Parameters
     ----------
-    steps : a ``.pvd`` file or :class:`~tetvr.io.collections.Collection`, or a list of mesh
-        files (each read on the worker that renders it) or of :class:`TetMesh` es.
+    steps : a ``.pvd`` file or :class:`~tetvr.io.collections.Collection`, an XDMF time
+        series, a glob pattern, or a list of mesh files or :class:`TetMesh` es. Files are
+        paths on this machine (read here, their bytes sent to the workers) or URLs the
+        workers read themselves (``s3://...``, ``file:///shared/...``;
+        :mod:`tetvr.cluster.inputs`).
     camera : default: fitted to the union of the steps' bounds.
     tf : default: :func:`tetvr.render.default_transfer_function` over the union of the
         steps' scalar ranges (a first pass on the cluster), so colours mean the same value
         in every frame.
     output : None to return the premultiplied float images; else a PNG name pattern with
-        ``{index}`` and/or ``{time}`` (``"frames/f_{index:04d}.png"``), written on the
-        workers, atomically; the names are returned. Before the cluster starts, a
-        ``ValueError`` refuses a name that is one of the steps' files (or a link to one)
-        and a ``PermissionError`` a folder that cannot be written (:mod:`tetvr.core.outputs`).
+        ``{index}`` and/or ``{time}`` (``"frames/f_{index:04d}.png"``). The PNGs are encoded
+        on the workers; a path pattern's files are written here, atomically, a URL
+        pattern's (``"s3://bucket/frames/f_{index:04d}.png"``) by the workers; the names are
+        returned. Before the cluster starts, a ``ValueError`` refuses a path that is one of
+        the steps' files (or a link to one) and a ``PermissionError`` a folder that cannot
+        be written (:mod:`tetvr.core.outputs`).
     client : see :func:`cluster_client`.
     progress : a tqdm bar over the finished frames.
 
@@ -232,7 +391,7 @@ def render_series(
     """
     from tqdm.auto import tqdm
 
-    from tetvr.render import _tf_range
+    from tetvr.core.image import atomic_output
 
     items = series_sources(steps)
     settings = settings or RenderSettings()
@@ -240,24 +399,22 @@ def render_series(
     names = _frame_names(output, items)
     with cluster_client(client) as c:
         if camera is None or tf is None:
-            got = gather(c, [c.submit(_summary, s.source, scalars, component, pure=False) for s in items],
-                         "reading the steps' bounds and ranges")
-            lo = np.min([b[0] for b, _ in got], axis=0)
-            hi = np.max([b[1] for b, _ in got], axis=0)
-            if camera is None:
-                camera = Camera.fit(_Bounds(np.stack([lo, hi])))  # type: ignore[arg-type]
-            if tf is None:
-                s_lo, s_hi = _tf_range(min(r[0] for _, r in got), max(r[1] for _, r in got))
-                tf = TransferFunction.preset("viridis", (s_lo, s_hi), opacity=0.5,
-                                             unit_distance=default_unit_distance(np.stack([lo, hi])))
-        futures = [c.submit(_render_step, s.source, camera, tf, size, settings, scalars, component, name, background,
-                            pure=False)
-                   for s, name in zip(items, names)]
-        index = {f.key: i for i, f in enumerate(futures)}
-        results: list[Any] = [None] * len(futures)
-        with tqdm(total=len(futures), disable=not progress, unit="frame", desc="tetvr") as bar:
-            for fut in as_completed(c, futures, "rendering the steps"):
-                results[index[fut.key]] = fut.result()  # a failed step raises here, naming its error
+            camera, tf = _fitted(c, items, camera, tf, scalars, component)
+        results: list[Any] = [None] * len(items)
+
+        def submit(files: Any, kind: str, k: int, i: int) -> Any:
+            url = names[i] if names[i] is not None and is_url(names[i]) else None
+            return c.submit(_render_step, files, kind, k, camera, tf, size, settings, scalars, component,
+                            names[i] is not None, url, background, pure=False)
+
+        with tqdm(total=len(items), disable=not progress, unit="frame", desc="tetvr") as bar:
+            for i, value in _steps_done(c, items, submit, "rendering the steps"):
+                name = names[i]
+                if name is not None and not is_url(name):
+                    with atomic_output(name) as f:  # the worker's PNG, written here
+                        f.write(value)
+                    value = name
+                results[i] = value
                 bar.update(1)
     return results
 
@@ -266,8 +423,9 @@ def animate_series(scene: Any, steps: Any, out: str | os.PathLike[str], *, clien
                    size: tuple[int, int] | None = None, progress: bool = True) -> list[Any]:
     """``tetvr animate``'s time series on a Dask cluster: every step of ``steps`` (see
     :func:`series_sources`) with the scene's camera, transfer function and settings, as
-    PNG frames ``out/frame_0000.png``, ... written on the workers, atomically, or as one
-    video (the frames gathered here, in order). Returns the files written."""
+    PNG frames ``out/frame_0000.png``, ... (encoded on the workers, written here,
+    atomically), or as one video (the frames gathered here, in order). Returns the files
+    written."""
     from pathlib import Path
 
     from tetvr.io.video import VIDEO_SUFFIXES, check_frames_output, write_frames

@@ -8,9 +8,11 @@ reports the size the picture really has on the page. This module only connects i
 
 * browser events -> :meth:`RenderLoop.update` (the wanted camera, transfer function,
   size); nothing renders on the kernel's threads;
-* each finished frame -> 8-bit RGB in a one-frame slot -> ``request_draw`` on the
-  kernel's event loop; ``get_frame`` hands out the newest, so a frame the browser had
-  no time for is replaced, never queued.
+* each finished frame -> 8-bit RGB in a one-frame slot -> sent by the render thread
+  itself while fewer than two frames are in flight, else by the thread that receives the
+  browser's acknowledgement; a frame the browser had no time for is replaced, never
+  queued. A cell that keeps the kernel busy does not hold the frames back (the kernel's
+  event loop is not involved), though the input that arrives meanwhile waits for it.
 
 The transfer-function editor is a second frame buffer showing the histogram, the opacity
 curve, the colour legend and its ticks: click to add a point, drag to move it,
@@ -54,6 +56,13 @@ __all__ = ["Viewer"]
 
 HIST_SIZE = (360, 120)
 LEGEND_HEIGHT = 14
+
+
+def _same(value: float, current: float, scale: float) -> bool:
+    """Whether a control's value is ``current`` up to rounding (relative to ``scale``): a
+    control echoes the value it was given as the browser rounds it, and an echo must not
+    draw a frame."""
+    return abs(float(value) - float(current)) <= 1e-9 * max(abs(float(scale)), abs(float(current)))
 
 
 class _Canvas(RemoteFrameBuffer):  # type: ignore[misc]
@@ -142,7 +151,8 @@ class Viewer:
         narrows with the page, keeping this aspect.
     settle_s : quiet time after the last input before the full frame is drawn.
     preview_budget_s : the render time previews aim for; their size follows the measured
-        cost of the frames before.
+        cost of this mesh's frames (:class:`~tetvr.apps.viewer.loop.PreviewSizer`), never
+        less than a quarter of the picture's width.
     volume, volume_tf, fusion : an image volume (:class:`tetvr.Volume`, e.g. the CT the
         mesh was made from) shown around the mesh, its transfer function (default: grey
         levels with an opacity ramp) and the fusion mode (:data:`tetvr.apps.viewer.model.FUSION_PICKER`,
@@ -167,7 +177,7 @@ class Viewer:
     """
 
     def __init__(self, scene: Scene | TetMesh | str | os.PathLike[str], *, size: tuple[int, int] | None = None,
-                 settle_s: float = 0.25, preview_budget_s: float = 0.06, step_degrees: float = 15.0,
+                 settle_s: float = 0.25, preview_budget_s: float = 0.1, step_degrees: float = 15.0,
                  volume: Any = None, volume_tf: Any = None, fusion: str = "interleave",
                  renderer: Any = "process", idle_release_s: float = 60.0) -> None:
         from tetvr.apps.viewer.model import scene_of
@@ -178,7 +188,9 @@ class Viewer:
         self._closed = False
         self._aspect = self.model.size[0] / self.model.size[1]
         self._css_size = tuple(self.model.size)
-        self._slot_lock = threading.Lock()
+        self._slot_lock = threading.RLock()  # the slot, and the sending (the ack re-enters _send)
+        self._status_lock = threading.Lock()
+        self._sent = 0  # frames sent: jupyter_rfb numbers them the same way, and the browser acknowledges them
         self._pending: tuple[NDArray[np.uint8], bool] | None = None
         self._shown: tuple[NDArray[np.uint8], bool] | None = None
         self._resend = False
@@ -192,6 +204,9 @@ class Viewer:
         self._hidden_timer: threading.Timer | None = None
         self._build()
         self.canvas.observe(self._on_visibility, names="_has_visible_views")
+        # The browser acknowledges each frame it took (jupyter_rfb's flow control): the
+        # frame kept for lack of room goes out then, on the thread the message comes in on.
+        self.canvas.observe(self._send, names="_frame_feedback")
         self.loop = RenderLoop(self.model, self._deliver, settle_s=settle_s, budget_s=preview_budget_s,
                                on_busy=self._busy)
         self.loop.update(final=True)
@@ -200,7 +215,10 @@ class Viewer:
     def _build(self) -> None:
         m = self.model
         width, height = m.size
-        self.canvas = _Canvas(self._image_frame, self._image_event, css_width="100%",
+        # jupyter_rfb's own draws (on the kernel's event loop) send nothing: the render
+        # thread sends each frame itself (_send), so a cell that keeps the kernel busy does not
+        # hold back the frames of input that came before it.
+        self.canvas = _Canvas(lambda: None, self._image_event, css_width="100%",
                               css_height=f"{height + 2}px", resizable=False, cursor="grab")
         self.canvas.max_buffered_frames = 2
         # Every frame as PNG: previews are small, and a JPEG preview would be followed
@@ -252,8 +270,7 @@ class Viewer:
                        layout=w.Layout(flex_flow="row wrap"))
         self.field.observe(lambda c: self._guard(lambda: self._on_field(c["new"])), names="value")
         self.colormap.observe(lambda c: self._guard(lambda: self._on_colormap(c["new"])), names="value")
-        self.unit.observe(lambda c: self._guard(lambda: self._tf(lambda ed: ed.set_unit_distance(c["new"]))),
-                          names="value")
+        self.unit.observe(lambda c: self._guard(lambda: self._on_unit(c["new"])), names="value")
         for box in (self.lo, self.hi):
             box.observe(lambda _c: self._guard(self._on_range), names="value")
         side = w.VBox([nav, self.field, self.colormap, self.unit, w.HTML("<b>mesh</b>"), self.hist, self.tf_panel.ticks,
@@ -294,48 +311,66 @@ class Viewer:
 
     def _busy(self, busy: bool) -> None:
         if busy:
-            self._post(lambda: self._set_status("rendering…", final=False))
+            self._set_status("rendering…", final=False)
 
     def _deliver(self, frame: Frame) -> None:
+        """A finished frame, on the render thread: into the slot, and out if the browser has room."""
         if frame.error is not None:
-            text = frame.error
-            self._post(lambda: self._show_error(text))
+            self._show_error(frame.error)
             return
         assert frame.image is not None
         rgb = np.ascontiguousarray(to_rgba8(frame.image, self.model.background)[..., :3])
         with self._slot_lock:
-            self._pending = (rgb, frame.final)  # a frame not yet taken is replaced
+            self._pending = (rgb, frame.final)  # a frame not yet sent is replaced
         if frame.final:
             self._last_full = frame
-        if not frame.final:
+        self._send()
+        if frame.final:
             # Previews leave the status at "rendering…": one message fewer per frame for the
             # browser to lay out while the pictures stream.
-            self._post(self.canvas.request_draw)
-            return
-        text = f"full {frame.size[0]}×{frame.size[1]} · {frame.seconds * 1e3:.0f} ms"
+            self._set_status(f"full {frame.size[0]}×{frame.size[1]} · {frame.seconds * 1e3:.0f} ms", final=True)
 
-        def show() -> None:
-            self.canvas.request_draw()
-            self._set_status(text, final=True)
-        self._post(show)
+    def _send(self, *_change: Any) -> None:
+        """Send the newest frame if fewer than ``max_buffered_frames`` are in flight (any thread).
+
+        jupyter_rfb's own scheduling would send from the kernel's event loop, which a running
+        cell blocks. Its comm messages may be sent from any thread (ipykernel hands them to its
+        IO thread), so the render thread sends, and keeps jupyter_rfb's rules: nothing before
+        the page reports a view (a frame sent before the page has made the widget is lost),
+        and a frame waits in the slot while the browser still decodes two earlier ones, to go
+        out with the acknowledgement that makes room."""
+        with self._slot_lock:
+            if self._closed or not self.canvas._has_visible_views:
+                return
+            acknowledged = int(self.canvas._frame_feedback.get("index", 0))
+            if self._sent - acknowledged >= self.canvas.max_buffered_frames:
+                return
+            item = self._image_frame()
+            if item is None:
+                return
+            self._sent += 1
+            self.canvas.send_frame(item)
 
     def _image_frame(self) -> NDArray[np.uint8] | None:
+        """The frame to send next: the newest not yet sent, or after a new view the last one again."""
         with self._slot_lock:
             item, self._pending = self._pending, None
             if item is None and self._resend:
                 item = self._shown  # a new view or a resize: the last frame again
             self._resend = False
             if item is None:
-                return None  # an older request whose frame a later one took: nothing to send
+                return None
             self._shown = item
         return item[0]
 
     def _set_status(self, text: str, *, final: bool) -> None:
         colour = "#444" if final else "#a60"
-        self.status.value = f'<span style="color:{colour}">{html.escape(text)}</span>'
+        with self._status_lock:  # set from the render thread and the kernel's
+            self.status.value = f'<span style="color:{colour}">{html.escape(text)}</span>'
 
     def _show_error(self, text: str) -> None:
-        self.status.value = f'<span style="color:#c00">error: {html.escape(text)}</span>'
+        with self._status_lock:
+            self.status.value = f'<span style="color:#c00">error: {html.escape(text)}</span>'
         if self.loop.last_error:
             self.canvas.print(self.loop.last_error)
 
@@ -396,7 +431,7 @@ class Viewer:
         else:
             with self._slot_lock:
                 self._resend = True
-            self.canvas.request_draw()  # a new view: send it the last frame
+            self._send()  # a new view: send it the last frame
 
     # ---- transfer-function editor ----
     def _hist_frame(self) -> NDArray[np.uint8]:
@@ -438,8 +473,17 @@ class Viewer:
         if name != "(scene)":
             self._tf(lambda ed: ed.set_colormap(name))
 
+    def _on_unit(self, value: float) -> None:
+        if _same(value, self.model.editor.unit_distance, value):
+            return  # the slider's echo of the value it was given (through log10 and 10**x)
+        self._tf(lambda ed: ed.set_unit_distance(value))
+
     def _on_range(self) -> None:
         lo, hi = self.lo.value, self.hi.value
+        old_lo, old_hi = self.model.editor.scalar_range
+        span = abs(old_hi - old_lo)
+        if _same(lo, old_lo, span) and _same(hi, old_hi, span):
+            return  # a box's echo of the value it was given
         self._tf(lambda ed: ed.set_range(lo, hi))
 
     def _sync_range(self) -> None:
@@ -484,7 +528,9 @@ class Viewer:
         if self._hidden_timer is not None:
             self._hidden_timer.cancel()
             self._hidden_timer = None
-        if not change["new"] and not self._closed:
+        if change["new"]:
+            self._send()  # what was drawn while no view was there
+        elif not self._closed:
             self._hidden_timer = threading.Timer(self.idle_release_s, self._release_if_hidden)
             self._hidden_timer.daemon = True
             self._hidden_timer.start()

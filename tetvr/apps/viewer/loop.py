@@ -55,15 +55,26 @@ class Frame:
 
 
 class PreviewSizer:
-    """The preview size from the measured cost of the last frames.
+    """The preview size from the measured cost of this mesh's frames.
 
     A frame's time is modelled as ``overhead + per_pixel * pixels``, fitted (least
-    squares) to the last ``window`` frames: the projected tetrahedra's per-tet work and a
+    squares) to the last ``window`` *warm* frames: the projected tetrahedra's per-tet work and a
     frame's fixed costs (transfer, setup) do not shrink with the image, the ray caster's
-    marching does. The preview gets the pixels whose predicted time meets ``budget_s``;
-    where the overhead alone is about the budget, shrinking further buys nothing, and the
-    preview keeps as many pixels as the overhead costs. Growth is limited to
+    marching does. The preview gets the pixels whose predicted time meets ``budget_s``.
+    Where the overhead alone takes more than half the budget, the budget cannot be met and
+    shrinking further buys little: the pixels then get half the budget, so a preview takes
+    the overhead and ``budget_s / 2`` more. (A fit on a loaded machine can find a large
+    overhead and a tiny cost a pixel; the pixels' share is bounded whatever the fit says.)
+    It is never narrower than ``min_scale`` of the full frame: below a quarter of the width
+    a preview is a smear.
+
+    A *cold* frame (``observe(..., cold=True)``) also paid for what is done once: the
+    mesh sent to the render process, its per-mesh records, a new table; a mesh's first
+    frame takes many times a warm one. It is no sample of the view's cost, only an upper
+    bound of it: until a warm frame is measured, the preview gets the pixels the budget
+    buys at the cold frame's time per pixel. Growth from warm samples is limited to
     ``max_growth`` (in side length) a frame, so one lucky frame cannot make the next slow.
+    :meth:`reset` forgets the samples (another mesh).
 
     Examples
     --------
@@ -71,21 +82,30 @@ class PreviewSizer:
     >>> s.observe(1.0, size=(400, 300), full=(400, 300))  # a full frame took 1 s
     >>> s.size((400, 300))                                  # -> ~1/10 the pixels
     (126, 95)
+    >>> s.reset(); s.observe(10.0, size=(400, 300), full=(400, 300), cold=True)
+    >>> s.size((400, 300))                                  # a first frame: at least min_scale
+    (40, 30)
     """
 
-    def __init__(self, *, budget_s: float = 0.06, min_scale: float = 0.125, max_scale: float = 1.0,
-                 max_growth: float = 1.25, window: int = 8) -> None:
+    def __init__(self, *, budget_s: float = 0.1, min_scale: float = 0.25, max_scale: float = 1.0,
+                 max_growth: float = 1.5, window: int = 8) -> None:
         if not (math.isfinite(budget_s) and budget_s > 0):
             raise ValueError(f"budget_s must be positive, got {budget_s!r}")
         if not (0 < min_scale <= max_scale <= 1):
             raise ValueError(f"need 0 < min_scale <= max_scale <= 1, got {min_scale!r}, {max_scale!r}")
+        if not (math.isfinite(max_growth) and max_growth >= 1):
+            raise ValueError(f"max_growth must be >= 1, got {max_growth!r}")
         self.budget_s = float(budget_s)
         self.min_scale = float(min_scale)
         self.max_scale = float(max_scale)
         self.max_growth = float(max_growth)
         self.window = int(window)
-        self.samples: list[tuple[float, float]] = []  # (pixels, seconds)
-        self.scale = 0.5
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the measured frames (the next mesh costs something else)."""
+        self.samples: list[tuple[float, float]] = []  # (pixels, seconds) of warm frames
+        self.scale = float(np.clip(0.5, self.min_scale, self.max_scale))
         self.overhead_s = 0.0
         self.per_pixel_s = 0.0
 
@@ -99,15 +119,25 @@ class PreviewSizer:
         # One size only, or a fit the noise bent: all of the time is per pixel.
         return 0.0, float(np.median(t / px))
 
-    def observe(self, seconds: float, *, size: tuple[int, int], full: tuple[int, int]) -> None:
-        """A frame of ``size`` pixels took ``seconds``; ``full`` is the full frame's size."""
+    def _scale_for(self, c: float, k: float, full: tuple[int, int]) -> float:
+        target_px = max(self.budget_s - c, self.budget_s / 2) / k
+        return math.sqrt(max(target_px, 1.0) / float(full[0] * full[1]))
+
+    def observe(self, seconds: float, *, size: tuple[int, int], full: tuple[int, int], cold: bool = False) -> None:
+        """A frame of ``size`` pixels took ``seconds``; ``full`` is the full frame's size;
+        ``cold``: the frame included work done once (see above)."""
         if not (seconds > 0 and math.isfinite(seconds)):
             return
-        self.samples = (self.samples + [(float(size[0] * size[1]), float(seconds))])[-self.window:]
+        pixels = float(size[0] * size[1])
+        if cold:
+            if not self.samples:  # the best bound there is until a warm frame
+                self.scale = float(np.clip(self._scale_for(0.0, seconds / pixels, full), self.min_scale,
+                                           self.max_scale))
+            return
+        self.samples = (self.samples + [(pixels, float(seconds))])[-self.window:]
         c, k = self._fit()
         self.overhead_s, self.per_pixel_s = c, k
-        target_px = (self.budget_s - c) / k if self.budget_s > 2 * c else c / k
-        want = math.sqrt(max(target_px, 1.0) / float(full[0] * full[1]))
+        want = self._scale_for(c, k, full)
         self.scale = float(np.clip(min(want, self.scale * self.max_growth), self.min_scale, self.max_scale))
 
     def size(self, full: tuple[int, int]) -> tuple[int, int]:
@@ -129,11 +159,11 @@ class RenderLoop:
     budget_s : the render time a preview aims for (see :class:`PreviewSizer`).
     on_busy : called with ``True`` when a frame starts and ``False`` when the loop has
         nothing left to draw ("rendering…" feedback).
-    clock : time source.
+    clock : time source, of the settle times and of each frame's render time.
     """
 
     def __init__(self, model: Any, deliver: Callable[[Frame], None], *, settle_s: float = 0.25,
-                 budget_s: float = 0.06, on_busy: Callable[[bool], None] | None = None,
+                 budget_s: float = 0.1, on_busy: Callable[[bool], None] | None = None,
                  clock: Callable[[], float] = time.monotonic) -> None:
         if not float(settle_s) >= 0.0:
             raise ValueError(f"settle_s must be >= 0, got {settle_s!r}")
@@ -141,6 +171,7 @@ class RenderLoop:
         self.deliver = deliver
         self.settle_s = float(settle_s)
         self.sizer = PreviewSizer(budget_s=budget_s)
+        self._last_state: tuple[Any, ...] | None = None  # what the last frame drew, but the view
         self.on_busy = on_busy
         self.clock = clock
         self._cond = threading.Condition(threading.RLock())
@@ -304,6 +335,17 @@ class RenderLoop:
             except Exception:  # noqa: BLE001 - feedback must not stop the loop; the error is kept
                 self.last_error = traceback.format_exc()
 
+    def _cold(self, mesh: Any, tf: Any, small_table: bool, fusion: Any) -> bool:
+        """Whether the next frame does work once, besides drawing the view (a new mesh, its
+        renderer made, a new table): its time is no measure of the view's cost. Another
+        mesh also makes the sizer forget the last one's costs."""
+        state = (mesh, tf, small_table, None if fusion is None else (id(fusion[0]), *fusion[1:]))
+        last, self._last_state = self._last_state, state
+        if last is None or last[0] is not mesh:
+            self.sizer.reset()
+            return True
+        return not self.model.renderer_ready or last[1:] != state[1:]
+
     def _run(self) -> None:
         while True:
             job = self._next()
@@ -316,16 +358,17 @@ class RenderLoop:
                     self.last_error = traceback.format_exc()
                 continue
             request, (mesh, camera, tf, small_table, fusion), revision, wanted_at = job
-            t0 = time.perf_counter()
+            cold = self._cold(mesh, tf, small_table, fusion)
+            t0 = self.clock()
             try:
                 image = self.model.draw(mesh, camera, tf, request, preview_table=small_table, fusion=fusion)
                 error = None
             except Exception as exc:  # noqa: BLE001 - shown in the viewer, not swallowed
                 image, error = None, f"{type(exc).__name__}: {exc}"
                 self.last_error = traceback.format_exc()
-            seconds = time.perf_counter() - t0
+            seconds = self.clock() - t0
             if error is None:
-                self.sizer.observe(seconds, size=request.size, full=tuple(self.model.size))
+                self.sizer.observe(seconds, size=request.size, full=tuple(self.model.size), cold=cold)
             frame = Frame(image, request.size, request.final, revision, seconds, wanted_at, error)
             with self._cond:
                 self._drawn = revision

@@ -481,6 +481,12 @@ class ViewerModel:
                 self._renderer = Renderer(self.settings)
         return self._renderer
 
+    @property
+    def renderer_ready(self) -> bool:
+        """Whether the renderer is made (else the next frame makes it, or starts its process)."""
+        r = self._renderer
+        return r is not None and bool(getattr(r, "alive", True))
+
     def render(self, request: RenderRequest) -> NDArray[np.float32]:
         """Draw what ``request`` asks for, of the current state."""
         return self.draw(self.mesh, self.camera, self.editor.transfer_function(), request, fusion=self.fusion_state())

@@ -1,0 +1,235 @@
+"""The numbers the docs quote in their sentences, generated from the JSON the benchmarks
+and docs/make_images.py write.
+
+A number in a sentence sits between ``<!-- value:NAME -->`` and ``<!-- /value -->`` on one
+line; bench/doc_tables.py rewrites it from :data:`VALUES` (``--write``) or checks it, like
+its tables. A value that states a comparison ("worse", "better") says it from the numbers,
+so a sentence cannot claim the opposite of what was measured.
+
+    python bench/doc_tables.py [--write]
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any, Callable
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "bench" / "results"
+PICTURES = ROOT / "docs" / "images" / "guide"
+SPAN = re.compile(r"<!-- value:(?P<name>[\w.:-]+) -->(?P<body>.*?)<!-- /value -->")
+
+
+def _load(path: Path) -> dict[str, Any]:
+    return json.loads(path.read_text())
+
+
+# ---------------------------------------------------------------- the method pictures
+def _methods() -> dict[str, Any]:
+    return _load(PICTURES / "methods" / "psnr.json")
+
+
+def picture(name: str) -> str:
+    """The PSNRs in the titles of docs/images/guide/methods/NAME.png: the baseline's, then the
+    variant's, each named (the variant by the settings it changes from the baseline)."""
+    p = _methods()[name]
+    changed = {k: v for k, v in p["variant_settings"].items() if p["base_settings"].get(k) != v}
+    label = ", ".join(f"`{k}={v}`" for k, v in changed.items())
+    return f"{p['base']} {p['base_psnr']:.1f} dB, {label} {p['variant_psnr']:.1f} dB"
+
+
+def _db_range(values: list[float]) -> str:
+    lo, hi = min(values), max(values)
+    return f"{lo:.1f} dB" if round(lo, 1) == round(hi, 1) else f"{lo:.1f}–{hi:.1f} dB"
+
+
+# ---------------------------------------------------------------- bench/speed_accuracy.py
+def _speed() -> dict[str, Any]:
+    return _load(RESULTS / "speed_accuracy.json")
+
+
+def _psnr(scene: dict[str, Any], variant: str) -> float | None:
+    rec = scene["variants"].get(variant)
+    return None if rec is None else rec.get("psnr")
+
+
+def _pairs(base: str, variant: str, *, scenes: str = "scenes") -> list[tuple[str, float, float]]:
+    """(scene, base PSNR, variant PSNR) where both were measured."""
+    out = []
+    for name, s in _speed()[scenes].items():
+        rec = s if scenes == "scenes" else {"variants": s}
+        a, b = _psnr(rec, base), _psnr(rec, variant)
+        if a is not None and b is not None:
+            out.append((name, a, b))
+    return out
+
+
+def _verdict(pairs: list[tuple[str, float, float]], what: str) -> str:
+    """How ``what`` (the second of each pair) compares with the first over the scenes, in
+    words chosen by the numbers: better, worse or the same (within 0.05 dB)."""
+    diffs = [b - a for _, a, b in pairs]
+    n = len(diffs)
+    better, worse = [d for d in diffs if d > 0.05], [-d for d in diffs if d < -0.05]
+    same = n - len(better) - len(worse)
+    if len(worse) == n:
+        return f"{what} is worse on all {n} scenes (by {_db_range(worse)})"
+    if len(better) == n:
+        return f"{what} is better on all {n} scenes (by {_db_range(better)})"
+    parts = ([f"better on {len(better)} (by up to {max(better):.1f} dB)"] if better else []) \
+        + ([f"worse on {len(worse)} (by up to {max(worse):.1f} dB)"] if worse else []) \
+        + ([f"the same on {same}"] if same else [])
+    return f"{what} is " + ", ".join(parts[:-1]) + (" and " if len(parts) > 1 else "") + parts[-1] + f" of {n} scenes"
+
+
+def table_filter() -> str:
+    """``table_filter="cubic"`` with each encoding, over the benchmark's scenes."""
+    norm = _pairs("default", "cubic thickness filter")
+    pre = _pairs("premultiplied table", "premultiplied table, cubic")
+    return (f"with the normalized table, {_verdict(norm, 'cubic')}; with the premultiplied table, "
+            f"{_verdict(pre, 'cubic')}")
+
+
+def smooth_tf_psnr() -> str:
+    """The default's PSNR range over the benchmark scenes whose transfer function is smooth."""
+    return _db_range([a for name, a, _ in _pairs("default", "default") if "spiky" not in name])
+
+
+def framebuffer_vs_table() -> str:
+    """The two 8-bit choices side by side, scene by scene."""
+    fb = _pairs("uint8 table", "uint8 framebuffer")
+    return (f"an 8-bit framebuffer gives {_db_range([b for _, _, b in fb])} and an 8-bit table "
+            f"{_db_range([a for _, a, _ in fb])}: {_verdict(fb, 'the 8-bit framebuffer')}")
+
+
+def auto_table_sizes() -> str:
+    """The auto table sizes the benchmark's scenes got, and what the table took to build
+    against the former fixed 256 x 16."""
+    sizes: dict[tuple[int, int], list[str]] = {}
+    ratios = []
+    for name, s in _speed()["scenes"].items():
+        t = s["auto_table"]
+        sizes.setdefault((t["n_bins"], t["n_slices"] + 1, bool(t.get("warp"))), []).append(name)
+        fixed = s["variants"].get("fixed table N=256, K=16 (the 0.x default)")
+        if fixed and fixed.get("table_s") and s["variants"]["default"].get("table_s") is not None:
+            ratios.append(s["variants"]["default"]["table_s"] / fixed["table_s"])
+    parts = [f"{n} × {n} × {k}{' (warped)' if warped else ''} on {len(v)} of {sum(map(len, sizes.values()))}"
+             for (n, k, warped), v in sorted(sizes.items(), key=lambda kv: -len(kv[1]))]
+    return ("; ".join(parts) + f", built in {min(ratios):.2f}–{max(ratios):.2f} times the time of the fixed "
+            "256 × 256 × 17")
+
+
+def table_build() -> str:
+    """Table build times by scalar bins (bench/stages.py)."""
+    r = _load(RESULTS / "stages.json")["table"]
+    by = r["by_bins"]
+    times = ", ".join(f"{by[n]['median']:.2f} s for N = {n}" for n in sorted(by, key=int))
+    return f"{times} (K = {r['n_slices']}, `bench/results/stages.json`)"
+
+
+def scalar_bins_auto() -> str:
+    """The auto table's scalar bins in the table_scalar_bins picture."""
+    p = _methods()["table_scalar_bins"]
+    return f"N = {p['base_table'][0]}" + (", nodes warped towards the spike" if p.get("base_table_warped") else "")
+
+
+def align_nodes() -> str:
+    """``table_align_nodes``: even nodes against the default's aligned nodes, per scene."""
+    scenes = "; ".join(f"{name} {a:.1f} → {b:.1f} dB" for name, a, b in _pairs("uniform table nodes", "default"))
+    stab = [p for p in _pairs("uniform table nodes", "default", scenes="stability") if max(p[1:]) < 150]
+    return f"{scenes}; over the stability cases, {_verdict(stab, 'aligned')}".replace(" scenes", " cases")
+
+
+def slices_vs_fixed() -> str:
+    """The auto table's thickness axis against K = 16, base 2 (bench/speed_accuracy.py)."""
+    return _verdict(_pairs("default", "K=16, base 2.0"), "K = 16 with base 2")
+
+
+def centroid_sort() -> str:
+    """The centroid sort's time on the largest mesh (bench/stages.py)."""
+    r = _load(RESULTS / "stages.json")["sort"]
+    return f"{r['median'] * 1e3:.0f} ms for {r['n_tets']:,} tets, `bench/results/stages.json`"
+
+
+# ---------------------------------------------------------------- other benchmarks
+def large_meshes() -> str:
+    """docs/limits.md: a frame of the largest mesh of bench/vs_vtk.py, each method."""
+    r = _load(RESULTS / "vs_vtk.json")
+    m = max(r["meshes"], key=lambda m: m["n_tets"])
+    v = m["view_change_median_s"]
+    size = "x".join(str(x) for x in r["size"])
+    return (f"{v['tetvr'] * 1e3:.0f} ms per view change for {m['n_tets']:,} tets at {size} by the default "
+            f"(tet marching) and {v['tetvr_projected'] * 1e3:.0f} ms by projected tetrahedra, on "
+            f"{r['machine']['cpu_count']} cores (`bench/results/vs_vtk.json`)")
+
+
+def spiky_even() -> str:
+    """docs/limits.md: the spiky transfer functions on even tables (bench/spiky_tf.py)."""
+    rows = [r for r in _load(RESULTS / "spiky_tf.json")["rows"] if r["tf"] != "smooth" and not r["table"]["warp"]]
+    bins = sorted({r["table"]["n_bins"] for r in rows})
+    return f"{_db_range([r['psnr'] for r in rows])} with {' or '.join(map(str, bins))} even nodes"
+
+
+def rings_bricks() -> str:
+    """docs/distributed.md: the rings' bricks by projected tetrahedra, the case furthest below
+    the single image."""
+    cases = [c for c in _load(RESULTS / "distributed.json")["accuracy"]["cases"]
+             if c["mesh"] == "interlocking rings" and c["method"] == "projected"]
+    c = min(cases, key=lambda c: c["psnr_bricks"] - c["psnr_whole"])
+    return (f"pixels up to {c['max_abs_diff']:.1e} off at P = {c['P']} in {c['view']} view "
+            f"(the {c['psnr_bricks'] - c['psnr_whole']:+.0f} dB in the table")
+
+
+def _anatomy(key: str, tf: str, view: str) -> float:
+    return _load(RESULTS / "vs_vtk_anatomy.json")["cases"][f"{tf}, {view}"][key]
+
+
+def anatomy_own() -> str:
+    """docs/paraview.md: VTK PT against its own formula, linear TF, per view."""
+    key = "VTK PT vs reference in its own convention"
+    return (f"{_anatomy(key, 'linear', 'perspective'):.0f} dB in perspective against "
+            f"{_anatomy(key, 'linear', 'parallel'):.0f} dB in parallel, linear transfer function")
+
+
+def anatomy_convention() -> str:
+    """docs/paraview.md: what VTK's optical convention alone costs (exact vs linear reference)."""
+    key = "convention: exact vs linear reference"
+    cases = _load(RESULTS / "vs_vtk_anatomy.json")["cases"]
+    lin = [c[key] for k, c in cases.items() if k.startswith("linear")]
+    spike = [c[key] for k, c in cases.items() if k.startswith("spike")]
+    alpha = cases["linear, perspective"]["mean alpha over covered pixels"]
+    return (f"{_db_range(lin)} with the linear transfer function, {_db_range(spike)} with the spike; mean alpha "
+            f"{alpha['vtk_convention']:.2f} against {alpha['exact']:.2f}")
+
+
+def anatomy_colour() -> str:
+    """docs/paraview.md: what averaging a segment's end colours costs on bluntfin."""
+    cases = _load(RESULTS / "vs_vtk_anatomy.json")["cases"]
+    return _db_range([c["colour averaging: linear vs vtk reference"] for c in cases.values()])
+
+
+def VALUES() -> dict[str, Callable[[], str]]:  # noqa: N802 - read like the TABLES dict
+    """Every value a doc may quote, by name."""
+    values: dict[str, Callable[[], str]] = {
+        "table_filter": table_filter, "smooth_tf_psnr": smooth_tf_psnr, "framebuffer_vs_table": framebuffer_vs_table,
+        "auto_table_sizes": auto_table_sizes, "table_build": table_build, "scalar_bins_auto": scalar_bins_auto,
+        "align_nodes": align_nodes, "slices_vs_fixed": slices_vs_fixed, "centroid_sort": centroid_sort,
+        "large_meshes": large_meshes, "spiky_even": spiky_even, "rings_bricks": rings_bricks,
+        "anatomy_own": anatomy_own, "anatomy_convention": anatomy_convention, "anatomy_colour": anatomy_colour}
+    for name in _methods():
+        values[f"picture:{name}"] = (lambda n=name: picture(n))
+    return values
+
+
+def render(text: str) -> str:
+    """``text`` with every value span regenerated; an unknown name is an error."""
+    known = VALUES()
+
+    def sub(m: re.Match[str]) -> str:
+        make = known.get(m.group("name"))
+        if make is None:
+            raise KeyError(f"<!-- value:{m.group('name')} -->: no such value in bench/doc_values.py")
+        return f"<!-- value:{m.group('name')} -->{make()}<!-- /value -->"
+
+    return SPAN.sub(sub, text)
