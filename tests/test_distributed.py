@@ -658,23 +658,23 @@ def test_radix_k_schedule_keeps_the_order():
     commutative and the schedule keeps the order it is given."""
     from tetvr.cluster.compositing import composite_locally, final_regions, radix_factors
 
-    np.seterr(all="raise")
-    rng = np.random.default_rng(3)
-    for p in range(1, 18):
-        images = [_premultiplied(rng, (5, 7)) for _ in range(p)]
-        for k in (2, 3, 4, 8):
-            factors = radix_factors(p, k)
-            assert int(np.prod(factors)) == p and all(f <= max(k, p) for f in factors)
-            got = composite_locally(images, factors)
-            assert np.abs(got - composite_over(images)).max() <= 1e-6, (p, k)
-            covered = np.zeros(35, dtype=int)
-            for lo, hi in final_regions(p, 35, factors):
-                covered[lo:hi] += 1
-            assert np.all(covered == 1), (p, k)
-        if p > 1:
-            shuffled = images[1:] + images[:1]
-            assert np.abs(composite_locally(shuffled) - composite_over(shuffled)).max() <= 1e-6
-            assert np.abs(composite_locally(shuffled) - composite_over(images)).max() > 1e-2, p
+    with np.errstate(all="raise"):  # only here: a global setting would leak into later tests
+        rng = np.random.default_rng(3)
+        for p in range(1, 18):
+            images = [_premultiplied(rng, (5, 7)) for _ in range(p)]
+            for k in (2, 3, 4, 8):
+                factors = radix_factors(p, k)
+                assert int(np.prod(factors)) == p and all(f <= max(k, p) for f in factors)
+                got = composite_locally(images, factors)
+                assert np.abs(got - composite_over(images)).max() <= 1e-6, (p, k)
+                covered = np.zeros(35, dtype=int)
+                for lo, hi in final_regions(p, 35, factors):
+                    covered[lo:hi] += 1
+                assert np.all(covered == 1), (p, k)
+            if p > 1:
+                shuffled = images[1:] + images[:1]
+                assert np.abs(composite_locally(shuffled) - composite_over(shuffled)).max() <= 1e-6
+                assert np.abs(composite_locally(shuffled) - composite_over(images)).max() > 1e-2, p
 
 
 @pytest.mark.parametrize("p", [2, 3, 6, 8, 16])

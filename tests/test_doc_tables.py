@@ -5,11 +5,22 @@ from __future__ import annotations
 import importlib.util
 import json
 import re
+import sys
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(autouse=True)
+def _bench_off_the_path():
+    """bench/doc_tables.py puts bench/ on sys.path (it runs as a script there): taken off
+    again after each test, or processes spawned later (Dask's workers) would import
+    bench/distributed.py as the ``distributed`` package."""
+    saved = list(sys.path)
+    yield
+    sys.path[:] = saved
 
 
 def _module():
