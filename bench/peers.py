@@ -34,9 +34,12 @@ PEERS: dict[str, str] = {"vtk_pt": "pt", "vtk_bunyk": "bunyk", "vtk_zsweep": "zs
 #: How the charts and tables name them.
 LABELS: dict[str, str] = {"vtk_pt": "VTK projected tetrahedra", "vtk_bunyk": "VTK Bunyk ray cast",
                           "vtk_zsweep": "VTK Z sweep"}
-#: Seconds to wait for any one reply of a VTK process (a Z sweep of 200k tets at 1024x1024
-#: takes tens of seconds on llvmpipe).
+#: Seconds to wait for any one reply of a VTK process (a Z sweep of 200k tets at 512x512
+#: takes minutes on two cores) ...
 TIMEOUT_S = 900.0
+#: ... and for one small image of a failure case (VTK's ray caster can loop for many
+#: minutes on an eye exactly in a face's plane; such a frame counts as failed).
+SMALL_TIMEOUT_S = 300.0
 #: What a failed frame or refused input raises.
 FAILURES = (RuntimeError, ValueError, OSError, VTKUnavailableError)
 
@@ -49,9 +52,10 @@ class VtkPeer:
     the first frame's wall time from the window's creation on.
     """
 
-    def __init__(self, key: str, mesh: TetMesh, tf: TransferFunction, size: tuple[int, int]) -> None:
+    def __init__(self, key: str, mesh: TetMesh, tf: TransferFunction, size: tuple[int, int],
+                 timeout: float = TIMEOUT_S) -> None:
         self.key = key
-        self.process = VTKProcess(mesh, tf, mapper=PEERS[key], size=size, timeout=TIMEOUT_S)
+        self.process = VTKProcess(mesh, tf, mapper=PEERS[key], size=size, timeout=timeout)
         self.last_wall = self.last_cpu = math.nan
 
     @property
@@ -86,10 +90,10 @@ def open_peers(mesh: TetMesh, tf: TransferFunction, size: tuple[int, int],
     return peers, failed
 
 
-def peer_images(mesh: TetMesh, tf: TransferFunction, cameras: list[Camera],
-                size: tuple[int, int]) -> dict[str, list[np.ndarray | str]]:
+def peer_images(mesh: TetMesh, tf: TransferFunction, cameras: list[Camera], size: tuple[int, int],
+                timeout: float = SMALL_TIMEOUT_S) -> dict[str, list[np.ndarray | str]]:
     """Every peer's image of each camera, or why it gave none (a failed frame ends the VTK
-    process, so the next camera starts a new one)."""
+    process, so the next camera starts a new one; ``timeout``: seconds for any one frame)."""
     out: dict[str, list[np.ndarray | str]] = {}
     for key in PEERS:
         out[key] = []
@@ -97,7 +101,7 @@ def peer_images(mesh: TetMesh, tf: TransferFunction, cameras: list[Camera],
         for camera in cameras:
             try:
                 if peer is None:
-                    peer = VtkPeer(key, mesh, tf, size)
+                    peer = VtkPeer(key, mesh, tf, size, timeout)
                 out[key].append(peer.frame(camera))
             except FAILURES as exc:
                 out[key].append(f"{type(exc).__name__}: {exc}")

@@ -83,8 +83,10 @@ VERY_SLOW_FRAME_S = 90.0
 #: (bench/vs_vtk.py times it against VTK).
 SCENE_MESHES = ("bluntfin_tets.vtu", "pipe_flow_init_flow.vtu", "beam_tet4_result_100.vtu")
 #: The scenes also measured at the larger sizes (the run must stay affordable on two cores):
-#: the two synthetic grids and the beam (per-pixel costs grow 4x, per-cell ones do not).
-LARGE_SCENES = ("convex, close perspective", "cell data (4 levels)", "beam_tet4_result_100.vtu")
+#: the two synthetic grids and the two SimVascular meshes (per-pixel costs grow 4x, per-cell
+#: ones do not).
+LARGE_SCENES = ("convex, close perspective", "cell data (4 levels)", "pipe_flow_init_flow.vtu",
+                "beam_tet4_result_100.vtu")
 #: The stability cases and imperfect-mesh classes are rendered at this size.
 STABILITY_SIZE = (96, 96)
 #: The methods the stability chart compares (tetvr's; VTK's three are added).
@@ -432,10 +434,12 @@ def measure_scene(mesh, cam, tf, size, vs, renderers, repeats, with_peers) -> tu
     return rec, images, ref
 
 
-def stability(vs, renderers, with_peers) -> dict[str, dict[str, Any]]:
-    """Every stability case at STABILITY_SIZE: each variant's and each VTK mapper's errors."""
-    out: dict[str, dict[str, Any]] = {}
+def stability(vs, renderers, with_peers, out: dict[str, dict[str, Any]], save) -> None:
+    """Every stability case at STABILITY_SIZE not yet in ``out``: each variant's and each VTK
+    mapper's errors, into ``out``, calling ``save()`` after each case."""
     for name in sorted(CASES):
+        if name in out:  # --resume
+            continue
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             c = case(name)
@@ -454,17 +458,20 @@ def stability(vs, renderers, with_peers) -> dict[str, dict[str, Any]]:
             for key, (image,) in peers.peer_images(c.mesh, c.tf, [c.camera], STABILITY_SIZE).items():
                 rec[key] = {"psnr": None, "failed": image} if isinstance(image, str) else errors(image, ref)
         out[name] = rec
+        save()
         print(f"  stability {name:20s} default max {rec['default'].get('max_error', float('nan')):.1e}"
               + "".join(f", {k} {rec[k].get('max_error', float('nan')):.1e}" for k in peers.PEERS if k in rec),
               flush=True)
-    return out
 
 
-def imperfect(renderers, with_peers, data: Path) -> list[dict[str, Any]]:
-    """Every view of every imperfect-mesh case (bench/imperfect.py) at STABILITY_SIZE, by
-    STABILITY_METHODS and the VTK mappers, against ``method="reference"``."""
-    rows = []
+def imperfect(renderers, with_peers, data: Path, rows: list[dict[str, Any]], save) -> None:
+    """Every view of every imperfect-mesh case (bench/imperfect.py) at STABILITY_SIZE not yet
+    in ``rows``, by STABILITY_METHODS and the VTK mappers, against ``method="reference"``;
+    appended to ``rows``, calling ``save()`` after each case."""
+    done = {(r["class"], r["mesh"]) for r in rows}
     for cls, label, build, cameras in imperfect_bench.cases(data):
+        if (cls, label) in done:  # --resume
+            continue
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             mesh = build()
@@ -490,7 +497,7 @@ def imperfect(renderers, with_peers, data: Path) -> list[dict[str, Any]]:
             print(f"  imperfect {cls:30s} {label:34s} view {k}: " + ", ".join(
                 f"{key[:14]} {m.get('max_error', float('nan')):.1e}" for key, m in row["methods"].items()),
                 flush=True)
-    return rows
+        save()
 
 
 def summarize(report: dict[str, Any]) -> dict[str, Any]:
@@ -651,12 +658,11 @@ def main(argv: list[str] | None = None) -> int:
         # The first size, the failure classes, then the larger sizes (the most expensive part last).
         _run_scenes(report, args, vs, renderers, with_peers, path, out, args.sizes[:1])
         if not args.only:
-            if not report["stability"]:
-                report["stability"] = stability(vs, renderers, with_peers)
+            def save() -> None:
                 write_json(path, report)
-            if not report["imperfect"]:
-                report["imperfect"] = imperfect(renderers, with_peers, args.data)
-                write_json(path, report)
+
+            stability(vs, renderers, with_peers, report["stability"], save)
+            imperfect(renderers, with_peers, args.data, report["imperfect"], save)
         _run_scenes(report, args, vs, renderers, with_peers, path, out, args.sizes[1:])
     except KeyboardInterrupt:
         report["interrupted"] = True

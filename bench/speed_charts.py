@@ -267,14 +267,14 @@ def stability_chart(report: dict[str, Any], path: Path) -> None:
     ax.set_ylim(len(classes) - 0.5, -1.0)
     ax.set_xscale("log")
     ax.set_xlim(ERROR_AXIS_FLOOR / 2, 6.0)
-    ax.set_xlabel("largest per-pixel error against the exact reference (premultiplied RGB; log)")
+    ax.set_xlabel("largest per-pixel error against the exact reference (premultiplied RGB; log; below 1e-7 drawn at 1e-7)")
     ax.grid(True, axis="x", alpha=0.3)
     size = "x".join(str(v) for v in report.get("stability_size", (96, 96)))
     ax.set_title(f"Failure classes at {size}: stability cases (black), imperfect meshes (purple, the worst of "
                  f"their meshes and views); {report['created'][:10]}", fontsize=9)
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.5 / fig.get_figheight() * 2.2), ncol=4, fontsize=8,
-              frameon=False)
-    fig.tight_layout()
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.75 / fig.get_figheight(), 1, 1))
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
