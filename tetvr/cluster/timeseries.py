@@ -11,14 +11,16 @@ time series (:func:`series_sources`); the cluster is ``dask.distributed``'s
 (:func:`tetvr.cluster.workers.cluster_client`). No file system is shared
 (:mod:`tetvr.cluster.inputs`): a step named by a path is read here as bytes and sent to its
 worker, one named by a URL the worker fetches; PNG frames come back to be written here, or
-go to the URL given. Measured speed-ups: ``docs/distributed.md``.
+go to the URL given. A video's frames stream (:func:`iter_series`): each is fetched from
+its worker in step order as the encoder takes it, so the client holds one at a time.
+Measured speed-ups: ``docs/distributed.md``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
-from typing import Any, Callable, Iterator, Union
+from typing import Any, Callable, Iterator, Literal, Sequence, Union
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,7 +35,7 @@ from tetvr.mesh.tetmesh import TetMesh
 from tetvr.optics.transfer import TransferFunction, default_unit_distance
 from tetvr.settings import RenderSettings
 
-__all__ = ["Source", "animate_series", "render_series", "series_sources"]
+__all__ = ["Source", "animate_series", "iter_series", "render_series", "series_sources", "series_window"]
 
 # A step: a mesh, a mesh file (a path or URL), (a .pvd, a step index) or ("xdmf", an XDMF file, a step index).
 Source = Union[TetMesh, str, tuple[str, int], tuple[str, str, int]]
@@ -233,15 +235,19 @@ def _summary(source: Files | TetMesh, kind: str, index: int, scalars: str | None
 
 def _render_step(source: Files | TetMesh, kind: str, index: int, camera: Camera, tf: TransferFunction,
                  size: tuple[int, int], settings: RenderSettings, scalars: str | None, component: int | None,
-                 png: bool, url: str | None, background: tuple[float, float, float] | None) -> Any:
-    """The step's image; with ``png``, its PNG file: written by this worker to ``url``
+                 encode: str, url: str | None, background: Sequence[float] | None) -> Any:
+    """The step's image as ``encode`` says: ``"float"``, the premultiplied float image;
+    ``"rgba8"``, 8-bit RGBA over ``background`` (:func:`~tetvr.core.image.to_rgba8`, a
+    quarter of the bytes); ``"png"``, its PNG file, written by this worker to ``url``
     (which is returned), or its bytes (for the client to write)."""
     mesh = _load(source, kind, index, scalars, component)
     image = worker_renderer(settings).render(mesh, camera, tf, size=size)
-    if not png:
+    if encode == "float":
         return image
-    from tetvr.core.image import png_bytes
+    from tetvr.core.image import png_bytes, to_rgba8
 
+    if encode == "rgba8":
+        return to_rgba8(image, background)
     data = png_bytes(image, background=background)
     return write_bytes(data, url) if url is not None else data
 
@@ -279,49 +285,89 @@ class _Bounds:
         self.bounds = bounds
 
 
-def _steps_done(c: Any, items: list[_Step], submit: Callable[[Any, str, int, int], Any], what: str
-                ) -> Iterator[tuple[int, Any]]:
-    """``(step, result)`` of each step as it is done, ``submit(files, kind, index, step)``
-    making its task (see :func:`_step_files`). At most two steps per worker are in flight: a step named by a path
-    is read here (and its bytes sent to a worker) only when its turn comes, so neither
-    the client nor the workers hold the series. A step whose bytes were lost with a
-    worker is sent again (twice at most); a step that fails raises, naming its error."""
+def _steps_done(c: Any, items: list[_Step], submit: Callable[[Any, str, int, int], Any], what: str, *,
+                window: int | None = None, ordered: bool = False) -> Iterator[tuple[int, Any]]:
+    """``(step, result)`` of each step as it is done (``ordered``: in step order),
+    ``submit(files, kind, index, step)`` making its task (see :func:`_step_files`).
+
+    At most ``window`` steps (default: two per worker) are in flight, and, ``ordered``,
+    done and waiting on the workers for an earlier step: a result is fetched here only when
+    it is yielded, so the client holds one at a time. A step named by a path is read here
+    (and its bytes sent to a worker) only when its turn comes, so neither the client nor the
+    workers hold the series. A step whose bytes or result were lost with a worker is sent
+    again (twice at most); a step that fails raises, naming its error."""
     from concurrent.futures import CancelledError
 
-    from tetvr.cluster.workers import as_completed
+    from tetvr.cluster.workers import as_completed, wait
 
-    direct = True if c.direct_to_workers is None else bool(c.direct_to_workers)
-    shared: dict[str, Any] = {}  # an XDMF series' files, sent once for all its steps
-    window = max(2, 2 * len(c.nthreads()))
+    send = _StepSender(c, items, submit)
+    window = window or max(2, 2 * len(c.nthreads()))
     todo = list(range(len(items)))[::-1]
     tries = [0] * len(items)
     pending: dict[Any, int] = {}
-    while todo or pending:
-        while todo and len(pending) < window:
+    done: dict[int, Any] = {}  # ordered: finished on a worker, waiting for an earlier step
+    turn = 0  # ordered: the step to yield next
+
+    def lost(i: int, exc: BaseException) -> None:
+        tries[i] += 1
+        if tries[i] > 2:
+            raise exc
+        send.shared.clear()
+        todo.append(i)  # sent again next: the step ``turn`` never waits for a place
+
+    while todo or pending or done:
+        while todo and (len(pending) + len(done) < window or (ordered and todo[-1] == turn)):
             i = todo.pop()
-            src = items[i].source
-            key = str(src[1]) if isinstance(src, tuple) and len(src) == 3 else None
-            if key is not None and key in shared and tries[i] == 0:
-                files, kind, k = shared[key][0], "xdmf", int(src[2])  # type: ignore[index]
-            else:
-                files, kind, k = _step_files(items[i])
-                if isinstance(files, Files) and files.sent:
-                    files = c.scatter(files, direct=direct, hash=False)
-                if key is not None:
-                    shared[key] = (files,)
-            pending[submit(files, kind, k, i)] = i
-        fut = next(as_completed(c, list(pending), what))
-        i = pending.pop(fut)
-        try:
-            result = fut.result()
-        except CancelledError:
-            tries[i] += 1
-            if tries[i] > 2:
-                raise
-            shared.clear()
-            todo.append(i)
-            continue
-        yield i, result
+            pending[send(i, tries[i])] = i
+        if pending:
+            fut = next(as_completed(c, list(pending), what))
+            i = pending.pop(fut)
+            if ordered and fut.status == "finished":
+                done[i] = fut  # its result stays on the worker until its turn
+            else:  # a failed step raises now, not at its turn
+                try:
+                    value = fut.result()
+                except CancelledError as exc:
+                    lost(i, exc)
+                else:
+                    yield i, value
+            fut = value = None  # no frame kept here while the next is awaited
+        while ordered and turn in done:
+            fut = done.pop(turn)
+            wait(c, [fut], what)  # done, unless its worker died since and it runs again
+            try:
+                value = fut.result()
+            except CancelledError as exc:
+                lost(turn, exc)
+                break
+            fut = None
+            yield turn, value
+            value = None
+            turn += 1
+
+
+class _StepSender:
+    """``send(i, tries)``: the task of step ``i``, its files read here (a path's) and
+    scattered, or left to the worker (a URL's); an XDMF series' files are sent once for
+    all its steps (``shared``, cleared when a worker that held them is lost)."""
+
+    def __init__(self, c: Any, items: list[_Step], submit: Callable[[Any, str, int, int], Any]) -> None:
+        self.c, self.items, self.submit = c, items, submit
+        self.direct = True if c.direct_to_workers is None else bool(c.direct_to_workers)
+        self.shared: dict[str, Any] = {}
+
+    def __call__(self, i: int, tries: int) -> Any:
+        src = self.items[i].source
+        key = str(src[1]) if isinstance(src, tuple) and len(src) == 3 else None
+        if key is not None and key in self.shared and tries == 0:
+            files, kind, k = self.shared[key], "xdmf", int(src[2])  # type: ignore[index]
+        else:
+            files, kind, k = _step_files(self.items[i])
+            if isinstance(files, Files) and files.sent:
+                files = self.c.scatter(files, direct=self.direct, hash=False)
+            if key is not None:
+                self.shared[key] = files
+        return self.submit(files, kind, k, i)
 
 
 def _fitted(c: Any, items: list[_Step], camera: Camera | None, tf: TransferFunction | None, scalars: str | None,
@@ -344,6 +390,32 @@ def _fitted(c: Any, items: list[_Step], camera: Camera | None, tf: TransferFunct
     return camera, tf
 
 
+def series_window(window: int | None = None) -> int | None:
+    """How many steps of a series may be in flight, or done and waiting for an earlier
+    step, at once: ``window`` where given, else ``TETVR_SERIES_WINDOW`` where set, else
+    None (two per worker, counted when the cluster is reached). It bounds the frames a
+    streamed series (:func:`iter_series`, a video) holds on the workers; the client holds
+    one at a time.
+
+    Examples
+    --------
+    >>> series_window(3)
+    3
+    """
+    if window is None:
+        given = os.environ.get("TETVR_SERIES_WINDOW", "").strip()
+        if not given:
+            return None
+        if not given.isdigit() or int(given) < 1:
+            raise ValueError(f"TETVR_SERIES_WINDOW must be a positive integer (frames), got {given!r}")
+        return int(given)
+    if isinstance(window, bool) or not isinstance(window, (int, np.integer)):
+        raise TypeError(f"window must be a positive integer (frames) or None, got {window!r}")
+    if window < 1:
+        raise ValueError(f"window must be a positive integer (frames) or None, got {window!r}")
+    return int(window)
+
+
 def render_series(
     steps: Any,
     *,
@@ -357,6 +429,7 @@ def render_series(
     background: tuple[float, float, float] | None = (1.0, 1.0, 1.0),
     client: Any = None,
     progress: bool = True,
+    window: int | None = None,
 ) -> list[Any]:
     """Render every step of a series on a Dask cluster, one scene for all steps.
 
@@ -380,6 +453,10 @@ def render_series(
         be written (:mod:`tetvr.core.outputs`).
     client : see :func:`cluster_client`.
     progress : a tqdm bar over the finished frames.
+    window : steps in flight at once (:func:`series_window`; default two per worker). A
+        PNG is written as it arrives, so the client holds one at a time; the images
+        (``output=None``) are all returned, so all held: :func:`iter_series` hands them
+        over one by one instead.
 
     Returns
     -------
@@ -397,6 +474,7 @@ def render_series(
     settings = settings or RenderSettings()
     size = image_size(size)
     names = _frame_names(output, items)
+    window = series_window(window)
     with cluster_client(client) as c:
         if camera is None or tf is None:
             camera, tf = _fitted(c, items, camera, tf, scalars, component)
@@ -405,10 +483,10 @@ def render_series(
         def submit(files: Any, kind: str, k: int, i: int) -> Any:
             url = names[i] if names[i] is not None and is_url(names[i]) else None
             return c.submit(_render_step, files, kind, k, camera, tf, size, settings, scalars, component,
-                            names[i] is not None, url, background, pure=False)
+                            "float" if names[i] is None else "png", url, background, pure=False)
 
         with tqdm(total=len(items), disable=not progress, unit="frame", desc="tetvr") as bar:
-            for i, value in _steps_done(c, items, submit, "rendering the steps"):
+            for i, value in _steps_done(c, items, submit, "rendering the steps", window=window):
                 name = names[i]
                 if name is not None and not is_url(name):
                     with atomic_output(name) as f:  # the worker's PNG, written here
@@ -419,23 +497,90 @@ def render_series(
     return results
 
 
+def iter_series(
+    steps: Any,
+    *,
+    camera: Camera | None = None,
+    tf: TransferFunction | None = None,
+    size: tuple[int, int] = (512, 512),
+    settings: RenderSettings | None = None,
+    scalars: str | None = None,
+    component: int | None = None,
+    pixels: Literal["float", "rgba8"] = "float",
+    background: Sequence[float] | None = (1.0, 1.0, 1.0),
+    client: Any = None,
+    progress: bool = True,
+    window: int | None = None,
+) -> Iterator[NDArray[Any]]:
+    """The frames of :func:`render_series`, one at a time, in step order, as the cluster
+    renders them: what a video's encoder takes, so that the client never holds the series.
+
+    At most ``window`` steps (:func:`series_window`; default two per worker) are in flight
+    or done and waiting on their workers for an earlier step; a frame is fetched from its
+    worker when it is yielded, so the client holds the frame it hands over (and what the
+    caller keeps). The cluster is reached, and the first pass that fits ``camera`` and
+    ``tf`` where None is run, at the first frame asked for; the arguments are checked now.
+
+    Parameters
+    ----------
+    pixels : ``"float"``, the premultiplied float RGBA images of :func:`render_series`;
+        ``"rgba8"``, 8-bit straight RGBA composited over ``background`` on the workers
+        (:func:`~tetvr.core.image.to_rgba8`: what a video stores, a quarter of the bytes).
+    steps, camera, tf, size, settings, scalars, component, client, progress : as
+        :func:`render_series`.
+
+    Examples
+    --------
+    >>> from tetvr.io.video import write_frames
+    >>> write_frames(iter_series("run.pvd", pixels="rgba8"), "run.mp4")  # doctest: +SKIP
+    """
+    if pixels not in ("float", "rgba8"):
+        raise ValueError(f"pixels must be 'float' or 'rgba8', got {pixels!r}")
+    items = series_sources(steps)
+    return _stream(items, camera, tf, image_size(size), settings or RenderSettings(), scalars, component, pixels,
+                   background, client, progress, series_window(window))
+
+
+def _stream(items: list[_Step], camera: Camera | None, tf: TransferFunction | None, size: tuple[int, int],
+            settings: RenderSettings, scalars: str | None, component: int | None, pixels: str,
+            background: Sequence[float] | None, client: Any, progress: bool, window: int | None
+            ) -> Iterator[NDArray[Any]]:
+    from tqdm.auto import tqdm
+
+    with cluster_client(client) as c:
+        if camera is None or tf is None:
+            camera, tf = _fitted(c, items, camera, tf, scalars, component)
+
+        def submit(files: Any, kind: str, k: int, i: int) -> Any:
+            return c.submit(_render_step, files, kind, k, camera, tf, size, settings, scalars, component, pixels,
+                            None, background, pure=False)
+
+        with tqdm(total=len(items), disable=not progress, unit="frame", desc="tetvr") as bar:
+            for _, image in _steps_done(c, items, submit, "rendering the steps", window=window, ordered=True):
+                bar.update(1)
+                yield image
+                image = None  # noqa: F841 - not held while the next frame is awaited
+
+
 def animate_series(scene: Any, steps: Any, out: str | os.PathLike[str], *, client: Any = None, fps: float = 12.0,
-                   size: tuple[int, int] | None = None, progress: bool = True) -> list[Any]:
+                   size: tuple[int, int] | None = None, progress: bool = True, window: int | None = None) -> list[Any]:
     """``tetvr animate``'s time series on a Dask cluster: every step of ``steps`` (see
     :func:`series_sources`) with the scene's camera, transfer function and settings, as
     PNG frames ``out/frame_0000.png``, ... (encoded on the workers, written here,
-    atomically), or as one video (the frames gathered here, in order). Returns the files
-    written."""
+    atomically, as each arrives), or as one video (8-bit frames made on the workers, handed
+    to the encoder one by one in step order: :func:`iter_series`). ``window``: see
+    :func:`series_window`. Returns the files written."""
     from pathlib import Path
 
-    from tetvr.io.video import VIDEO_SUFFIXES, check_frames_output, write_frames
+    from tetvr.io.video import VIDEO_SUFFIXES, check_frames_output, video_background, write_frames
 
     inputs = [("mesh file", p) for p in scene.input_paths()] + _step_inputs(series_sources(steps))
     out = check_frames_output(out, inputs, by="animate_series")
     kw = dict(camera=scene.camera, tf=scene.tf, size=tuple(size or scene.size), settings=scene.settings,
-              scalars=scene.scalars, component=scene.component, client=client, progress=progress)
+              scalars=scene.scalars, component=scene.component, client=client, progress=progress, window=window)
     if out.suffix.lower() in VIDEO_SUFFIXES:
-        return write_frames(render_series(steps, **kw), out, background=scene.background, fps=fps)
+        frames = iter_series(steps, pixels="rgba8", background=video_background(out, scene.background), **kw)
+        return write_frames(frames, out, background=scene.background, fps=fps)
     out.mkdir(parents=True, exist_ok=True)
     names = render_series(steps, output=str(out / "frame_{index:04d}.png"), background=scene.background, **kw)
     return [Path(n) for n in names]

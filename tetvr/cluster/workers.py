@@ -17,7 +17,7 @@ import logging
 import os
 import threading
 import time
-from typing import Any, Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from tetvr.settings import RenderSettings
 
@@ -171,6 +171,30 @@ def wait_for_workers(client: Any, what: str, timeout: float | None = None) -> li
         time.sleep(min(0.2, limit))
 
 
+class _NoWorkerTimer:
+    """How long ``client``'s cluster has had no worker: :meth:`check` raises a
+    ``TimeoutError`` naming ``what`` once none has been seen for ``limit`` seconds (counted
+    from the first check that found none; a worker seen, or :meth:`reset`, starts it again).
+    ``clock`` is for tests."""
+
+    def __init__(self, client: Any, what: str, limit: float, clock: Callable[[], float] = time.monotonic) -> None:
+        self.client, self.what, self.limit, self.clock = client, what, limit, clock
+        self.since: float | None = None
+
+    def reset(self) -> None:
+        self.since = None
+
+    def check(self) -> None:
+        if self.client.nthreads():
+            self.since = None
+            return
+        now = self.clock()
+        if self.since is None:
+            self.since = now
+        elif now - self.since >= self.limit:
+            raise TimeoutError(_no_workers(self.client, self.what, self.limit))
+
+
 def wait(client: Any, futures: list[Any], what: str, timeout: float | None = None) -> None:
     """Wait until ``futures`` are done (finished, failed or cancelled), or raise a
     ``TimeoutError`` naming ``what`` once the cluster has had no worker for ``timeout``
@@ -178,20 +202,13 @@ def wait(client: Any, futures: list[Any], what: str, timeout: float | None = Non
     ever. A frame that is only slow, with workers at it, is waited for."""
     distributed = _dask()
     limit = no_workers_timeout() if timeout is None else timeout
-    since: float | None = None
+    timer = _NoWorkerTimer(client, what, limit)
     while True:
         try:
             distributed.wait(futures, timeout=min(0.5, limit))
             return
         except TimeoutError:
-            pass
-        now = time.monotonic()
-        if client.nthreads():
-            since = None
-        elif since is None:
-            since = now
-        elif now - since >= limit:
-            raise TimeoutError(_no_workers(client, what, limit))
+            timer.check()
 
 
 def gather(client: Any, futures: list[Any], what: str, timeout: float | None = None) -> list[Any]:
@@ -206,24 +223,19 @@ def as_completed(client: Any, futures: list[Any], what: str, timeout: float | No
     ``what`` once the cluster has had no worker for ``timeout`` seconds (:func:`wait`)."""
     distributed = _dask()
     limit = no_workers_timeout() if timeout is None else timeout
-    pending, since = list(futures), None
+    timer = _NoWorkerTimer(client, what, limit)
+    pending = list(futures)
     while pending:
         try:
             done, _ = distributed.wait(pending, timeout=min(0.5, limit), return_when="FIRST_COMPLETED")
         except TimeoutError:
             done = set()
-        if done:
-            since = None
-            yield from (f for f in pending if f in done)
-            pending = [f for f in pending if f not in done]
+        if not done:
+            timer.check()
             continue
-        now = time.monotonic()
-        if client.nthreads():
-            since = None
-        elif since is None:
-            since = now
-        elif now - since >= limit:
-            raise TimeoutError(_no_workers(client, what, limit))
+        timer.reset()
+        yield from (f for f in pending if f in done)
+        pending = [f for f in pending if f not in done]
 
 
 def _no_workers(client: Any, what: str, limit: float) -> str:

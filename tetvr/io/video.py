@@ -7,12 +7,13 @@ import re
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
-from numpy.typing import ArrayLike
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from tetvr.core.image import to_rgba8, write_png
 from tetvr.core.outputs import check_outputs, check_outputs_in, check_writable, check_writable_folder
 
-__all__ = ["VIDEO_SUFFIXES", "check_frames_output", "write_frames"]
+__all__ = ["VIDEO_SUFFIXES", "check_frames_output", "video_background", "write_frames"]
 
 #: Output suffixes written as one video file (imageio; mp4/webm/mkv/mov/avi need imageio-ffmpeg).
 VIDEO_SUFFIXES = (".mp4", ".webm", ".mkv", ".mov", ".avi", ".gif")
@@ -26,7 +27,11 @@ def write_frames(images: Iterable[ArrayLike], out: str | os.PathLike[str], *,
 
     ``out`` is checked (:func:`check_frames_output`) against ``inputs``, ``(what, path)``
     pairs of the files the frames are made from, before the first image is taken from
-    ``images`` (which may render each frame as it is asked for)."""
+    ``images`` (which may render each frame as it is asked for). Each image is let go
+    before the next is taken: a PNG is written, a video frame piped to ffmpeg (a GIF's are
+    kept by Pillow, as 8-bit RGBA, until the file is closed). A video also
+    takes 8-bit frames, ``uint8`` (H, W, 4) straight RGBA already composited over
+    :func:`video_background` (:func:`~tetvr.core.image.to_rgba8`), written as given."""
     out = check_frames_output(out, inputs, by="write_frames", prefix=prefix)
     if out.suffix.lower() in VIDEO_SUFFIXES:
         return [_write_video(images, out, background, fps)]
@@ -62,6 +67,30 @@ def check_frames_output(out: str | os.PathLike[str], inputs: Iterable[tuple[str,
     return out
 
 
+def video_background(out: str | os.PathLike[str], background: Sequence[float] | None) -> Sequence[float] | None:
+    """The background a video at ``out`` composites its frames over: ``background``, but
+    white for None except in a GIF (the one format here with transparency).
+
+    Examples
+    --------
+    >>> video_background("a.mp4", None), video_background("a.gif", None)
+    ((1.0, 1.0, 1.0), None)
+    """
+    if background is None and Path(out).suffix.lower() != ".gif":
+        return (1.0, 1.0, 1.0)
+    return background
+
+
+def _rgba8(image: ArrayLike, background: Sequence[float] | None) -> NDArray[np.uint8]:
+    """A frame as 8-bit RGBA: a ``uint8`` one as given, a float one through :func:`to_rgba8`."""
+    img = np.asarray(image)
+    if img.dtype != np.uint8:
+        return to_rgba8(img, background)
+    if img.ndim != 3 or img.shape[2] != 4:
+        raise ValueError(f"an 8-bit frame must be RGBA of shape (H, W, 4), got {img.shape}")
+    return img
+
+
 def _write_video(images: Iterable[ArrayLike], out: Path, background: Sequence[float] | None, fps: float) -> Path:
     try:
         import imageio.v2 as imageio
@@ -75,10 +104,11 @@ def _write_video(images: Iterable[ArrayLike], out: Path, background: Sequence[fl
             raise ImportError(f"writing {out.suffix} needs imageio-ffmpeg: pip install imageio-ffmpeg; "
                               "or write a .gif, or a folder of PNG frames") from None
     out.parent.mkdir(parents=True, exist_ok=True)
-    bg = (1.0, 1.0, 1.0) if background is None and out.suffix.lower() != ".gif" else background
+    bg = video_background(out, background)
     kw: dict[str, Any] = {"duration": 1.0 / fps, "loop": 0} if out.suffix.lower() == ".gif" else {"fps": fps, "macro_block_size": 1}
     with imageio.get_writer(out, **kw) as writer:
         for image in images:
-            rgba = to_rgba8(image, bg)
+            rgba = _rgba8(image, bg)
+            image = None  # noqa: F841 - not held while the next frame is made
             writer.append_data(rgba if out.suffix.lower() == ".gif" else rgba[..., :3])  # type: ignore[attr-defined]
     return out
