@@ -265,6 +265,12 @@ void main() {
     vec3 o, d;
     pixel_ray(gl_FragCoord.xy, o, d);
     float per_t = length(d);  // world length per unit of t
+    // The plane across the ray (axes e1, e2) in which the walk by points sees the points.
+    vec3 dn = normalize(d);
+    vec3 e1 = normalize(abs(dn.x) < 0.6 ? vec3(0.0, -dn.z, dn.y) : vec3(-dn.y, dn.x, 0.0));
+    vec3 e2 = cross(dn, e1);
+    float inv_dd = 1.0 / dot(d, d);
+    vec3 ow = ray_from_eye(gl_FragCoord.xy);
     int tet, face;
     float t_in;
     if (entry >= 0) {
@@ -275,15 +281,29 @@ void main() {
         if (entry_den < -GRAZING * per_t) {
             t_in = max(-(dot(entry_plane.xyz, o) + entry_plane.w) / entry_den, u_near);
         } else {
-            // The face it was drawn for is seen edge-on (the eye in its plane), where its
-            // plane says nothing of where the ray comes in: the last of the other planes
-            // it enters by does. (Only then: a plane almost along the ray gives a t that
-            // rounding moves far, and the faces shared by bricks must give both bricks one t.)
-            t_in = u_near;
-            for (int k = 0; k < 4; ++k) {
-                vec4 plane = face_plane(tet, k);
-                float den = dot(plane.xyz, d);
-                if (k != face && den < 0.0) t_in = max(t_in, -(dot(plane.xyz, o) + plane.w) / den);
+            // The face it was drawn for is seen almost edge-on, where a rounding moves the
+            // t of its plane far. The face's points, seen across the ray, give it as the
+            // walk gives an exit (a face two bricks share: one t for both): the depths of
+            // the points weighed by where the ray passes among them, a t within the face's
+            // own depth span whatever the rounding. Where the eye is in the face's plane,
+            // so that the points lie on a line through the ray, they say nothing, and the
+            // last of the other planes the ray enters by gives t.
+            ivec4 ids = tet_ids(tet);
+            vec3 a = across(point_record(ids[(face + 1) & 3]).xyz - ow, e1, e2, d, inv_dd);
+            vec3 b = across(point_record(ids[(face + 2) & 3]).xyz - ow, e1, e2, d, inv_dd);
+            vec3 c = across(point_record(ids[(face + 3) & 3]).xyz - ow, e1, e2, d, inv_dd);
+            vec3 E = vec3(cross2(b.xy, c.xy), cross2(c.xy, a.xy), cross2(a.xy, b.xy));
+            vec3 w = max(E.x + E.y + E.z < 0.0 ? -E : E, 0.0);
+            float sum = w.x + w.y + w.z;
+            if (sum > 0.0) {
+                t_in = max(dot(w, vec3(a.z, b.z, c.z)) / sum, u_near);
+            } else {
+                t_in = u_near;
+                for (int k = 0; k < 4; ++k) {
+                    vec4 plane = face_plane(tet, k);
+                    float den = dot(plane.xyz, d);
+                    if (k != face && den < 0.0) t_in = max(t_in, -(dot(plane.xyz, o) + plane.w) / den);
+                }
             }
         }
     } else {
@@ -312,11 +332,6 @@ void main() {
     // scalar) and carry over to the next triangle, so the walk always holds a triangle
     // about the ray, whatever the rounding. A step reads the link across the exit face
     // and the point it leads to.
-    vec3 dn = normalize(d);
-    vec3 e1 = normalize(abs(dn.x) < 0.6 ? vec3(0.0, -dn.z, dn.y) : vec3(-dn.y, dn.x, 0.0));
-    vec3 e2 = cross(dn, e1);
-    float inv_dd = 1.0 / dot(d, d);
-    vec3 ow = ray_from_eye(gl_FragCoord.xy);
     g_eye_x = vec2(dot(u_inv_view[0].xyz, e1), dot(u_inv_view[0].xyz, e2));
     g_eye_y = vec2(dot(u_inv_view[1].xyz, e1), dot(u_inv_view[1].xyz, e2));
     int sa, sb, sc;
@@ -337,6 +352,7 @@ void main() {
     ivec4 link;
     int k = 0;
     bool ended = false;  // the walk stopped as it should: opaque, at its window's end, out of the mesh
+    bool missed = false;  // the ray's first point lies outside the tet it was given (see below)
     for (int step = 0; step < PLANE_STEPS && step < u_max_steps; ++step) {
         float t_exit = 3.0e38;
         int exit_face = -1;
@@ -348,6 +364,11 @@ void main() {
                 float t = -(dot(plane.xyz, o) + plane.w) / den;
                 if (t < t_exit) { t_exit = t; exit_face = kk; }
             }
+            // The entry point must lie inside the tet's other faces: a face the rasteriser
+            // gave a pixel its triangle does not cover (a sliver seen almost edge-on, a
+            // face of zero area) puts it on the face's plane away from the tet. Measured as
+            // a distance, which rounding moves by far less than u_slack at any angle.
+            if (step == 0) missed = missed || dot(plane.xyz, o + t_in * d) + plane.w > u_slack;
         }
         if (exit_face < 0) break;  // no face ahead: only rounding on a degenerate ray does this
         t_out = max(t_exit, t_in);
@@ -482,10 +503,15 @@ void main() {
             vec4 plane = face_plane(tet, k);
             float den = dot(plane.xyz, d);
             if (den > 0.0) t_out = max(-(dot(plane.xyz, o) + plane.w) / den, t_in);
+            // A face the ray meets almost edge-on (or not at all) is one it may have left
+            // by a rounding: seen across the ray, its sliver holds the ray where a face
+            // beside it, inside the mesh, should; the ray would lose the chord after it.
+            if (den < GRAZING * per_t) suspect(px);
         }
     } else if (!ended) {
         suspect(px);  // no face ahead, or the step bound reached
     }
+    if (missed) suspect(px);  // an entry outside its tet
 #if LIST
     f_last = -1;
     if (status == STATUS_REENTER) {

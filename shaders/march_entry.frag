@@ -73,7 +73,12 @@ void main() {
     vec3 p = o + u_near * d;
     for (int k = 0; k < 4; ++k) {
         vec4 plane = face_plane(v_id, k);
-        if (dot(plane.xyz, p) + plane.w > u_tolerance) discard;
+        // A rounding's allowance across the faces the tet shares (a point on one is in
+        // either tet, so no ray falls between them), none on the mesh's boundary: a ray
+        // running almost along a boundary face a rounding outside it would otherwise start
+        // in the mesh, and cross a long chord the reference does not.
+        float allowance = tet_link(v_id, k).x < 0 ? 0.0 : u_tolerance;
+        if (dot(plane.xyz, p) + plane.w > allowance) discard;
     }
     f_entry = -2 - v_id;
     gl_FragDepth = 0.0;

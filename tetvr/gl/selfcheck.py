@@ -8,7 +8,8 @@ rounding case no test has met). The pass counts such rays and lists their pixels
 by the exact CPU reference (:func:`tetvr.reference.tets.render_reference_pixels`) and puts
 them in the image, so that the frame is right and says how many it traced. A clean mesh
 gives none (``tests/test_selfcheck.py``); where more rays went wrong than the pass lists,
-the rest stay as drawn and a warning says so.
+the rest stay as drawn and a warning says so. The ray limits fusion reads
+(:func:`retrace_extent`) are checked and traced again the same way.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from tetvr.gl import march_layout
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.optics.transfer import TransferFunction
 
-__all__ = ["retrace"]
+__all__ = ["retrace", "retrace_extent"]
 
 
 def retrace(image: NDArray[np.float32], n_suspect: int, suspect_pixels: NDArray[np.int64], mesh: TetMesh,
@@ -51,3 +52,26 @@ def retrace(image: NDArray[np.float32], n_suspect: int, suspect_pixels: NDArray[
              f"{pixels.size} were traced again exactly; the others may be wrong: render with "
              f"method=\"projected\", or method=\"reference\" for an exact image")
     return int(pixels.size)
+
+
+def retrace_extent(extent: NDArray[np.float32], n_suspect: int, suspect_pixels: NDArray[np.int64], mesh: TetMesh,
+                   camera: Camera) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """The ray limits of a march's extent frame (``extent``: (height, width, 4), row 0 at
+    the top, first entry and last exit depth, 3e38 / -3e38 where none) as ``(front, back)``
+    with ``inf`` / ``-inf`` where no tet covers the pixel, the pixels the march listed as gone
+    wrong (``suspect_pixels``: GL rows) taken from the reference
+    (:func:`tetvr.reference.segments.pixel_extents`)."""
+    front = np.where(extent[..., 0] >= 3e38, np.inf, extent[..., 0]).astype(np.float32)
+    back = np.where(extent[..., 1] <= -3e38, -np.inf, extent[..., 1]).astype(np.float32)
+    if n_suspect == 0 or suspect_pixels.size == 0:
+        return front, back
+    from tetvr.reference.segments import pixel_extents  # only when a walk went wrong
+
+    height, width = front.shape
+    pixels = (height - 1 - suspect_pixels // width) * width + suspect_pixels % width
+    f, b = pixel_extents(mesh, camera, (width, height), pixels)
+    front.reshape(-1)[pixels], back.reshape(-1)[pixels] = f, b
+    if n_suspect > march_layout.SUSPECT_LENGTH:
+        warn(f"the ray caster's walk went wrong on {n_suspect} rays of this {width}x{height} frame of ray limits "
+             f"and {pixels.size} were traced again exactly; the others may be wrong")
+    return front, back

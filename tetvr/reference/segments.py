@@ -22,7 +22,7 @@ import dataclasses
 from typing import Iterator, NamedTuple
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from tetvr.core.camera import Camera, resolve_clipping_range
 from tetvr.core.checks import check_instances
@@ -31,7 +31,7 @@ from tetvr.core.rays import EyeRays
 from tetvr.mesh.adjacency import FACE_VERTICES
 from tetvr.mesh.tetmesh import TetMesh
 
-__all__ = ["DEFAULT_CHUNK", "RaySegments", "ray_lengths", "ray_segments"]
+__all__ = ["DEFAULT_CHUNK", "RaySegments", "pixel_extents", "ray_lengths", "ray_segments"]
 
 #: Candidate (tet, pixel) pairs examined at once: ~200 bytes of temporaries each, so
 #: ~50 MB. Larger chunks are no faster (bluntfin at 256x256 on 2 cores: 2.3-3 s for
@@ -352,3 +352,35 @@ def ray_segments(
         e = np.zeros(0)
         return RaySegments(np.zeros(0, np.int64), e, e.copy(), e.copy(), e.copy(), np.zeros(0, np.int64))
     return RaySegments(*(np.concatenate(cols) for cols in zip(*parts)))
+
+
+def pixel_extents(mesh: TetMesh, camera: Camera, size: tuple[int, int], pixels: ArrayLike, *,
+                  chunk: int = DEFAULT_CHUNK) -> tuple[Float, Float]:
+    """The eye depth at which the rays of ``pixels`` (row * width + column, row 0 at the top)
+    first enter the mesh and last leave it, within the clipping range: ``(front, back)``,
+    each (len(pixels),), ``inf`` and ``-inf`` where a ray meets no tet. What a GPU frame of
+    ray limits traces again where its walk went wrong (:mod:`tetvr.gl.selfcheck`).
+
+    Examples
+    --------
+    >>> mesh = TetMesh.from_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 1, 2, 3]], [0, 1, 2, 3])
+    >>> cam = Camera(position=(0.2, 0.2, 5), focal_point=(0.2, 0.2, 0), parallel_projection=True,
+    ...              parallel_scale=0.1)
+    >>> front, back = pixel_extents(mesh, cam, (1, 1), [0])
+    >>> front.round(6).tolist(), back.round(6).tolist()
+    ([4.4], [5.0])
+    """
+    width, height = _validate(mesh, camera, size)
+    chunk = _check_chunk(chunk)
+    pixels = np.asarray(pixels, dtype=np.int64).reshape(-1)
+    if pixels.size and (pixels.min() < 0 or pixels.max() >= width * height):
+        raise ValueError(f"pixels must lie in the {width}x{height} image, got {int(pixels.min())}..{int(pixels.max())}")
+    camera = resolve_clipping_range(camera, mesh.bounds)
+    rays = EyeRays.from_camera(camera, width, height)
+    unique, back_of = np.unique(pixels, return_inverse=True)
+    front, back = np.full(unique.size, np.inf), np.full(unique.size, -np.inf)
+    for seg in _pixel_segments(_tet_geometry(mesh, camera, rays), rays, unique, chunk):
+        at = np.searchsorted(unique, seg.pixel)
+        np.minimum.at(front, at, seg.t_in)
+        np.maximum.at(back, at, seg.t_out)
+    return front[back_of], back[back_of]
