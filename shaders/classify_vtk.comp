@@ -25,8 +25,10 @@
 //      u_linear_depth, u_sqrt_bias, u_unit_distance, u_offset, u_count.
 // Out: Fans (common.glsl's FanVertex, as classify.comp writes them): vertex 0 the thick
 //      vertex, 1..4 the silhouette (a class-1 fan repeats vertex 1 in slot 4), each with
-//      its NDC position; the chord word holds the thickness over the unit distance and
-//      the segment word (r, g, b, opacity), colours as 8-bit values / 255 (vtk_pt.vert).
+//      its NDC position; the exact-tet word holds the NDC depth's bits instead (VTK's
+//      vertex z: the class-2 crossing takes the first edge's, so each triangle lies in a
+//      face of the tet), the chord word the thickness over the unit distance and the
+//      segment word (r, g, b, opacity), colours as 8-bit values / 255 (vtk_pt.vert).
 
 #include "common.glsl"
 
@@ -45,9 +47,9 @@ uniform float u_unit_distance;
 const int SQRT_TABLE_SIZE = 2048;
 
 // Fan vertex `slot` of the tet at local drawing position p (colour as 8-bit values).
-void put_vtk(int p, int slot, vec2 ndc, vec3 color8, float opacity, float thickness) {
+void put_vtk(int p, int slot, vec3 ndc, vec3 color8, float opacity, float thickness) {
     int v = 2 * (FAN_VERTICES * p + slot);
-    fan_words[v] = uvec4(floatBitsToUint(ndc), uint(-1), floatBitsToUint(thickness));
+    fan_words[v] = uvec4(floatBitsToUint(ndc), floatBitsToUint(thickness));
     fan_words[v + 1] = floatBitsToUint(vec4(color8 / 255.0, opacity));
 }
 
@@ -83,7 +85,7 @@ void main() {
     vec3 lo = min(min(P[0], P[1]), min(P[2], P[3]));
     vec3 hi = max(max(P[0], P[1]), max(P[2], P[3]));
     if (any(greaterThan(lo, vec3(1.0))) || any(lessThan(hi.xy, vec2(-1.0))) || lo.z < -1.0) {
-        for (int slot = 0; slot < FAN_VERTICES; ++slot) put_vtk(p, slot, vec2(2.0), vec3(0.0), 0.0, 0.0);
+        for (int slot = 0; slot < FAN_VERTICES; ++slot) put_vtk(p, slot, vec3(2.0, 2.0, 0.0), vec3(0.0), 0.0, 0.0);
         return;
     }
 
@@ -101,7 +103,7 @@ void main() {
     vec3 Cv = P[seg.z] - P[seg.x];
     float denominator = A.x * B.y - A.y * B.x;
     if (denominator == 0.0) {  // VTK skips the tet
-        for (int slot = 0; slot < FAN_VERTICES; ++slot) put_vtk(p, slot, vec2(2.0), vec3(0.0), 0.0, 0.0);
+        for (int slot = 0; slot < FAN_VERTICES; ++slot) put_vtk(p, slot, vec3(2.0, 2.0, 0.0), vec3(0.0), 0.0, 0.0);
         return;
     }
     float alpha = (B.y * Cv.x - B.x * Cv.y) / denominator;
@@ -114,11 +116,11 @@ void main() {
         vec3 color = uchar3(0.5 * (C[seg.x] + alpha * (C[seg.y] - C[seg.x]) + C[seg.z] + beta * (C[seg.w] - C[seg.z])));
         // VTK's opacity line uses alpha for the second edge too (its colour line has beta).
         float opacity = 0.5 * (T[seg.x] + alpha * (T[seg.y] - T[seg.x]) + T[seg.z] + alpha * (T[seg.w] - T[seg.z]));
-        put_vtk(p, 0, X.xy, color, opacity, depth / u_unit_distance);
+        put_vtk(p, 0, X, color, opacity, depth / u_unit_distance);
         ivec4 ring = ivec4(seg.x, seg.z, seg.y, seg.w);
         for (int slot = 1; slot < FAN_VERTICES; ++slot) {
             int k = ring[slot - 1];
-            put_vtk(p, slot, P[k].xy, C[k], T[k], 0.0);
+            put_vtk(p, slot, P[k], C[k], T[k], 0.0);
         }
         return;
     }
@@ -137,10 +139,10 @@ void main() {
     float edgea = T[seg.z] + beta * (T[seg.w] - T[seg.z]);
     float facea = (edgea + (alpha - 1.0) * T[seg.x]) / alpha;
     float opacity = 0.5 * (facea + T[seg.y]);
-    put_vtk(p, 0, P[seg.y].xy, color, opacity, depth / u_unit_distance);
+    put_vtk(p, 0, P[seg.y], color, opacity, depth / u_unit_distance);
     ivec4 ring = ivec4(seg.x, seg.z, seg.w, seg.x);
     for (int slot = 1; slot < FAN_VERTICES; ++slot) {
         int k = ring[slot - 1];
-        put_vtk(p, slot, P[k].xy, C[k], T[k], 0.0);
+        put_vtk(p, slot, P[k], C[k], T[k], 0.0);
     }
 }

@@ -10,6 +10,8 @@
 // (row 0) and, for TABLE_NORMALIZED, the mean extinction from the optical depth per cell
 // (row 1) or the opacity per node (row 2) instead of the table's A, which cannot follow
 // -ln(1 - a) near opacity 1.
+// TABLE_STEPS 1: the transfer function steps at some nodes (tetvr.optics.tablesteps): segments
+// are cut at the nodes they cross (lookup_steps.glsl, u_steps). Not with TABLE_WARP.
 // Returns premultiplied RGBA.
 
 // The per-fragment arithmetic is reduced to multiply-adds by constants that
@@ -58,6 +60,9 @@ float warp_extinction(vec2 x, vec2 st) {
     return n0.z > 0.5 ? opacity * n0.y : -log(1.0 - opacity) * n0.y;
 }
 #endif
+#if defined(TABLE_STEPS) && TABLE_STEPS
+#include "lookup_steps.glsl"
+#endif
 
 // Texture coordinates of a (front, back) scalar pair (with TABLE_WARP: cells, see warp_st): node i sits at texel centre
 // (i + 0.5) / N. No clamp is needed: the texture clamps to its edge texels, and those are
@@ -70,6 +75,9 @@ vec2 table_st(vec2 s) {
 
 // The segment with texture coordinates st (table_st) and world length d.
 vec4 lookup_table(vec2 st, float d) {
+#if defined(TABLE_STEPS) && TABLE_STEPS
+    return lookup_steps(st, d);
+#endif
 #if defined(TABLE_WARP) && TABLE_WARP
     vec2 cells = st;
     st = warp_st(cells);

@@ -334,7 +334,7 @@ def test_compare_uses_paraviews_unit_distance_for_a_defaulted_scene(tmp_path):
 @pytest.mark.parametrize("parity", [False, True], ids=["exact", "parity"])
 def test_state_renders_against_the_reference(parity):
     """The loaded state, GPU against the CPU reference in the same convention. Exact
-    settings: measured 87.7 dB, max 0.0009 (the table's interpolation); bar max 2/255 with
+    settings: measured 101.0-102.2 dB, max 0.0009 (one pixel, as with integration="exact"); bar max 2/255 with
     no pixel beyond 1/255. Parity takes VTK's projected tetrahedra step for step (checked
     against VTK in test_parity_against_vtks_projected_tetra), and so departs from VTK's
     formula as VTK does: the discretized colour map classified at the vertices blurs its

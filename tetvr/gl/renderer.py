@@ -35,7 +35,7 @@ from tetvr.order.method import choose, march_fits
 from tetvr.gl.projected import ProjectedCells
 from tetvr.gl.framesize import frame_method
 from tetvr.gl.raymarch import Marcher, raymarch_capacity
-from tetvr.gl.selfcheck import retrace
+from tetvr.gl.selfcheck import retrace, retrace_extent
 from tetvr.gl.vtkpt import VTKParity, vtk_depth_order
 from tetvr.gl.surfaces import RayWindow, SurfacePass
 from tetvr.core.surface import Surface, check_surfaces
@@ -114,7 +114,7 @@ class Renderer(GLOwner):
         self._programs: dict[tuple[str, ...], Any] = {}
         self._cells = ProjectedCells(self, chunk_tets)  # projected tetrahedra's buffers (no GL object yet)
         self._marcher: Marcher | None = None  # the tet-marching ray caster's GL state, made on first use
-        self._parity: VTKParity | None = None  # VTK parity's GL state (optics="vtk"), made on first use
+        self._parity = VTKParity(self)  # VTK parity's GL state (optics="vtk"; no GL object yet)
         self._surfaces: SurfacePass | None = None  # the opaque surfaces' GL state, made on first use
         self._table: PreintegrationTable | None = None  # the table in the texture
         self._table_cache: tuple[tuple[Any, ...], PreintegrationTable] | None = None  # table()'s last (key, table)
@@ -134,17 +134,14 @@ class Renderer(GLOwner):
         self._table = self._table_cache = None
         if self._marcher is not None:
             self._marcher.forget()
-        if self._parity is not None:
-            self._parity.forget()
+        self._parity.forget()
         if self._surfaces is not None:
             self._surfaces.forget()
 
     def _gl_objects(self) -> list[Any]:
-        objs = [*self._cells.gl_objects(), *self._programs.values()]
+        objs = [*self._cells.gl_objects(), *self._programs.values(), *self._parity.gl_objects()]
         if self._marcher is not None:
             objs += self._marcher.gl_objects()
-        if self._parity is not None:
-            objs += self._parity.gl_objects()
         if self._surfaces is not None:
             objs += self._surfaces.gl_objects()
         if self._tf_points is not None:
@@ -323,9 +320,10 @@ class Renderer(GLOwner):
         order : an explicit drawing order (cell ids, back to front) instead of the sort;
             it may leave cells out (they are not drawn).
         shader : "tet" (the real thing) or "floor" (constant colour; fill-rate floor).
-        clip : keep only this part of the mesh (:class:`tetvr.Clip`), cut exactly per pixel.
+        clip : keep only this part of the mesh (:class:`tetvr.Clip`), cut exactly per pixel
+            (VTK parity: the cells cut first, as ParaView's Clip filter cuts them; :mod:`tetvr.gl.vtkpt`).
         surfaces : opaque surfaces (:class:`tetvr.Surface`) that end the rays they meet,
-            composited behind the tets in front of them.
+            composited behind the tets in front of them (VTK parity: VTK's depth test per fragment).
 
         Returns
         -------
@@ -336,9 +334,8 @@ class Renderer(GLOwner):
         windowed = clip is not None or bool(surfaces)
         if windowed and shader != "tet":
             raise ValueError(f"clip and surfaces need shader='tet', got {shader!r}")
-        if windowed and self.settings.optics == "vtk":
-            raise ValueError("clip and surfaces are not part of VTK parity (optics='vtk'), which reproduces VTK's "
-                             "projected tetrahedra as they are; use optics 'exact' or 'linear'")
+        if clip is not None and self.settings.optics == "vtk":  # ParaView's Clip filter: the cells cut first
+            (mesh, order), clip = self._parity.cut(mesh, clip, order), None
         size = self._check(size, frame_method(self.settings, mesh.n_tets, order=order, shader=shader), bool(surfaces))
         camera = resolve_clipping_range(camera, union_bounds(mesh.bounds, *(s.points for s in surfaces)))  # None: VTK's
         window = RayWindow.make(clip, camera)
@@ -366,7 +363,7 @@ class Renderer(GLOwner):
         check_float32_range(mesh, tf)
         check_view_precision(mesh, camera, size)
         if shader == "tet" and self.settings.optics == "vtk":
-            return self._render_vtk(mesh, camera, tf, size, order)
+            return self._render_vtk(mesh, camera, tf, size, order, window.limit)
         if shader == "tet" and self.settings.integration == "exact":
             return self._raymarch_exact(mesh, camera, tf, size, order, window)
         if (shader == "tet" and order is None and self.settings.method != "projected"
@@ -385,7 +382,8 @@ class Renderer(GLOwner):
 
         defines = dict(PERSPECTIVE_CORRECT=int(self.settings.perspective_correct),
                        TABLE_NORMALIZED=int(table.encoding == "normalized"), TABLE_WARP=int(table.nodes is not None),
-                       TABLE_CUBIC=int(self.settings.table_filter == "cubic"))
+                       TABLE_CUBIC=int(self.settings.table_filter == "cubic"),
+                       **({"TABLE_STEPS": 1} if table.steps is not None else {}))  # lookup_steps.glsl
         if shader == "tet":
             before_near, beyond_far = _outside_clipping_range(mesh, camera)
             defines.update(CLIP_RANGE=int(before_near or beyond_far or window.active),
@@ -447,17 +445,15 @@ class Renderer(GLOwner):
         return order_ids, cycle_breaks, n_culled
 
     def _render_vtk(self, mesh: TetMesh, camera: Camera, tf: TransferFunction, size: tuple[int, int],
-                    order: NDArray[np.integer[Any]] | None) -> NDArray[np.float32]:
+                    order: NDArray[np.integer[Any]] | None, limit: Any) -> NDArray[np.float32]:
         """One frame in VTK parity (``optics="vtk"``): VTK's projected tetrahedra step for
-        step (:mod:`tetvr.gl.vtkpt`), without the table. ``sort="auto"`` is VTK's order
-        (centroids by depth, :func:`~tetvr.gl.vtkpt.vtk_depth_order`); another sort is honoured."""
+        step (:mod:`tetvr.gl.vtkpt`), without the table, depth-tested against the surfaces'
+        ``limit``. ``sort="auto"`` is VTK's order (:func:`~tetvr.gl.vtkpt.vtk_depth_order`); another is honoured."""
         uniforms = self._view_uniforms(mesh, camera, size)
         sort = vtk_depth_order if self.settings.sort == "auto" else None
         order_ids, cycle_breaks, n_culled = self._drawing_order(mesh, camera, tf, size, order, None, sort)
         self._clock.lap("sort")
-        if self._parity is None:
-            self._parity = VTKParity(self)
-        image = self._parity.render(mesh, tf, size, uniforms, order_ids)
+        image = self._parity.render(mesh, tf, size, uniforms, order_ids, limit)
         self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, cycle_breaks=cycle_breaks, n_culled=n_culled,
                                      **self._clock.laps)
         return image
@@ -503,7 +499,8 @@ class Renderer(GLOwner):
                   window: RayWindow = RayWindow()) -> NDArray[np.float32]:
         """One frame by tet marching (:mod:`tetvr.gl.raymarch`), with this renderer's table."""
         defines = dict(TABLE_NORMALIZED=int(table.encoding == "normalized"), TABLE_WARP=int(table.nodes is not None),
-                       TABLE_CUBIC=int(self.settings.table_filter == "cubic"))
+                       TABLE_CUBIC=int(self.settings.table_filter == "cubic"),
+                       **({"TABLE_STEPS": 1} if table.steps is not None else {}))  # lookup_steps.glsl
         self._table_tex.use(0)
         return self._march_frame(mesh, camera, size, table.gl_uniforms(), defines, window)
 
@@ -551,9 +548,8 @@ class Renderer(GLOwner):
             size = self._check(size, "raymarch")
             camera, uniforms = self._march_view(mesh, camera, size)
             ext = self._march.extent(mesh, camera, size, uniforms, self._clock)
-            front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)
-            back = np.where(ext[..., 1] <= -3e38, -np.inf, ext[..., 1]).astype(np.float32)
-            return front, back
+            st = self._marcher.last_stats  # its pixels gone wrong, traced again (tetvr.gl.selfcheck)
+            return retrace_extent(ext, st.n_suspect, st.suspect_pixels, mesh, camera)
         return self._depth_extent(mesh, camera, size)
 
     @gl_locked

@@ -14,6 +14,7 @@ import numpy as np
 from tetvr.core.image import _gib, image_size
 from tetvr.gl.framesize import FrameMemoryError, check_frame
 from tetvr.gl.context import ForkedProcessError, check_not_forked, context_alive, context_lock, current_in_thread
+from tetvr.optics.tablesteps import STEPS_UNIT
 
 if TYPE_CHECKING:
     from tetvr.optics.table import PreintegrationTable
@@ -282,30 +283,42 @@ def table_texture(ctx: Any, table: "PreintegrationTable") -> Any:
     tex = ctx.texture3d((k1, n, n), 4, texels.tobytes(), dtype=dtype)
     tex.repeat_x = tex.repeat_y = tex.repeat_z = False
     tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+    extras = {}
     warp = table.warp_texels()
-    if warp is None:
-        return tex
-    # A warped table's node index and optical depth per scalar cell (lookup.glsl's u_warp:
-    # rows 0 and 1), read unfiltered.
-    warp_tex = ctx.texture((warp.shape[1], warp.shape[0]), 4, warp.tobytes(), dtype="f4")
-    warp_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-    return WarpedTableTexture(tex, warp_tex)
+    if warp is not None:
+        # A warped table's node index and optical depth per scalar cell (lookup.glsl's u_warp:
+        # rows 0 and 1), read unfiltered.
+        warp_tex = ctx.texture((warp.shape[1], warp.shape[0]), 4, warp.tobytes(), dtype="f4")
+        warp_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        extras[WARP_UNIT] = warp_tex
+    if table.steps is not None:
+        # A stepped table's corner blocks (lookup_steps.glsl's u_steps), filtered as the table.
+        k1, _, width, _ = table.steps.shape  # (slice, back node, bin and front node, RGBA)
+        steps_tex = ctx.texture3d((width, 2, k1), 4, np.ascontiguousarray(table.steps).tobytes(), dtype=dtype)
+        steps_tex.repeat_x = steps_tex.repeat_y = steps_tex.repeat_z = False
+        steps_tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        extras[STEPS_UNIT] = steps_tex
+    return TableTextures(tex, extras) if extras else tex
 
 
-class WarpedTableTexture:
-    """The textures of a warped table (:mod:`tetvr.optics.tablewarp`), used and released as one:
-    ``use(unit)`` binds the table there and the warp at :data:`WARP_UNIT` (``u_warp``)."""
+class TableTextures:
+    """The textures of a warped table (:mod:`tetvr.optics.tablewarp`) or of one whose transfer
+    function steps at its nodes (:mod:`tetvr.optics.tablesteps`), used and released as one:
+    ``use(unit)`` binds the table there and the others at their units (:data:`WARP_UNIT`,
+    ``u_warp``; :data:`~tetvr.optics.tablesteps.STEPS_UNIT`, ``u_steps``)."""
 
-    def __init__(self, table: Any, warp: Any) -> None:
-        self.table, self.warp = table, warp
+    def __init__(self, table: Any, extras: dict[int, Any]) -> None:
+        self.table, self.extras = table, extras
 
     def use(self, location: int = 0) -> None:
         self.table.use(location)
-        self.warp.use(WARP_UNIT)
+        for unit, tex in self.extras.items():
+            tex.use(unit)
 
     def release(self) -> None:
         self.table.release()
-        self.warp.release()
+        for tex in self.extras.values():
+            tex.release()
 
 
 #: The texture unit of a warped table's warp (``PreintegrationTable.gl_uniforms``' u_warp;

@@ -15,6 +15,25 @@ interpolated linearly in screen space, and ``alpha = 1 - exp(-a d / u)`` per fra
 VTK's too: cell centroids by their depth along the direction of projection
 (``vtkCellCenterDepthSort``, :func:`vtk_depth_order`). Nothing here is used by the other
 optics; the pre-integration table is not built.
+
+What ParaView draws with the volume is taken VTK's way too:
+
+* **Opaque surfaces** (:class:`tetvr.Surface`). ParaView draws opaque geometry first;
+  ``vtkOpenGLProjectedTetrahedraMapper::ProjectTetrahedra`` copies its depth buffer and draws
+  the tets' triangles with the depth test on (``GL_LEQUAL``) and depth writes off, each fan
+  vertex at its projected depth (the class-2 crossing at the first edge's), so every
+  triangle lies in a face of its tet. A fragment is kept, with the tet's whole thickness, if
+  that face is not behind the surface, and dropped otherwise: a tet straddling a surface is
+  drawn whole or not at all, pixel by pixel. Parity tests each fragment so against the
+  surfaces' depth (:class:`~tetvr.gl.surfaces.SurfacePass`, ``shaders/vtk_pt.frag``); the
+  renderer then composites the tets over the surfaces' colour, as VTK's blend over the
+  framebuffer does. The same depth puts the far plane where VTK's GL puts it.
+* **Clips** (:class:`tetvr.Clip`). In ParaView a clip of a volume is the Clip filter: it cuts
+  the cells into new ones before the volume mapper (which has no clipping planes of its own;
+  ``vtkOpenGLProjectedTetrahedraMapper`` ignores the mapper's), and the representation
+  tetrahedralizes them. Parity does the same on the CPU (:func:`tetvr.mesh.clipfilter.clip_cells`,
+  cached per mesh and clip) and draws the cut mesh: new vertices, classified like any others,
+  not tetvr's per-pixel cut of each ray.
 """
 
 from __future__ import annotations
@@ -25,10 +44,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tetvr.core.camera import Camera
+from tetvr.core.clip import Clip
+from tetvr.mesh.clipfilter import clip_cells
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.optics.model import vtk_vertex_rgba8
 from tetvr.optics.transfer import TransferFunction
 from tetvr.gl.host import DrawHost
+from tetvr.gl.surfaces import LIMIT_UNIT
+from tetvr.gl.util import set_uniforms
 
 __all__ = ["VTKParity", "vtk_depth_order", "SQRT_TABLE_SIZE"]
 
@@ -55,9 +78,24 @@ class VTKParity:
     def __init__(self, owner: DrawHost) -> None:
         self.owner = owner
         self._colors: tuple[TetMesh, TransferFunction, Any] | None = None
+        self._cut: tuple[TetMesh, Clip, TetMesh | None] | None = None
 
     def forget(self) -> None:
         self._colors = None
+
+    def cut(self, mesh: TetMesh, clip: Clip, order: NDArray[Any] | None
+            ) -> tuple[TetMesh, NDArray[np.uint32] | None]:
+        """The mesh ParaView's Clip filter makes of ``mesh`` (:func:`~tetvr.mesh.clipfilter.clip_cells`;
+        the last one kept), and the drawing order: None (the sort's), or empty where the clip
+        leaves nothing (``mesh`` is then returned, none of it drawn). An explicit ``order``
+        names cells of the uncut mesh and is refused."""
+        if order is not None:
+            raise ValueError("an explicit drawing order cannot go with a clip in VTK parity (optics='vtk'): the "
+                             "clip cuts the cells into new ones first, as ParaView's Clip filter does")
+        if self._cut is None or self._cut[0] is not mesh or self._cut[1] != clip:
+            self._cut = (mesh, clip, clip_cells(mesh, clip))
+        kept = self._cut[2]
+        return (mesh, np.empty(0, dtype=np.uint32)) if kept is None else (kept, None)
 
     def gl_objects(self) -> list[Any]:
         return [] if self._colors is None else [self._colors[2]]
@@ -81,9 +119,10 @@ class VTKParity:
         return buffer
 
     def render(self, mesh: TetMesh, tf: TransferFunction, size: tuple[int, int], uniforms: dict[str, Any],
-               order_ids: NDArray[Any]) -> NDArray[np.float32]:
+               order_ids: NDArray[Any], limit: Any = None) -> NDArray[np.float32]:
         """One frame: premultiplied RGBA, (height, width, 4), row 0 at the top. ``uniforms``
-        are the renderer's view uniforms (the mesh uploaded), ``order_ids`` the drawing order."""
+        are the renderer's view uniforms (the mesh uploaded), ``order_ids`` the drawing order,
+        ``limit`` the opaque surfaces' eye depths (:class:`~tetvr.gl.surfaces.SurfacePass`) or None."""
         import moderngl
 
         owner = self.owner
@@ -99,11 +138,14 @@ class VTKParity:
                             u_sqrt_bias=(SQRT_TABLE_SIZE - 1) / max(max_edge2, 1e-30),
                             u_unit_distance=float(tf.unit_distance))
         classify = owner._program("classify_vtk")
-        prog = owner._program("vtk_pt")
+        prog = owner._program("vtk_pt", SURFACE_DEPTH=int(limit is not None))
         fb_dtype = "f4" if owner.settings.framebuffer == "float32" else "f1"
         fbo = owner._use_target(size, 4, fb_dtype)
         fbo.use()
         fbo.clear(0.0, 0.0, 0.0, 0.0)
+        if limit is not None:  # bound after the target, which may be made (and bound) just above
+            limit.use(LIMIT_UNIT)
+            set_uniforms(prog, u_limit=LIMIT_UNIT, u_proj=proj32)
         owner._clock.lap("setup")
         for n in owner._chunks(mesh, order_ids):
             colors.bind_to_storage_buffer(5)

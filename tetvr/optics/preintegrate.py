@@ -51,6 +51,7 @@ from tetvr.core.image import check_memory
 from tetvr.optics.model import MAX_OPACITY, OPTICS, mean_neg_log
 from tetvr.optics.table import (STEP_GAP, PreintegrationTable, aligned_nodes, check_table_size, check_unit_distance,
                                 node_limits, table_build_bytes, table_scalar_range)
+from tetvr.optics.tablesteps import corner_blocks
 from tetvr.optics.tablewarp import extinction_cells, max_warped_nodes, node_opacity_cells, warped_nodes
 from tetvr.optics.transfer import TransferFunction
 
@@ -122,14 +123,13 @@ def build_table(
     optics : "exact" (``tau = -ln(1 - a)/u``), "linear" (``tau = a/u``, VTK's unstructured
         mappers) or "vtk" (``tau = a/u`` and the mean of the end colours, unattenuated: the
         fragment formula of VTK's projected tetrahedra); see :data:`tetvr.optics.model.OPTICS`.
-    warp : place the ``n_bins`` nodes where the transfer function varies, control points
-        on nodes (:func:`tetvr.optics.tablewarp.warped_nodes`; at most
-        :func:`~tetvr.optics.tablewarp.max_warped_nodes`), instead of evenly; the
-        table's ``nodes`` then says where they are.
+    warp : place the ``n_bins`` nodes where the transfer function varies, control points on nodes
+        (:func:`tetvr.optics.tablewarp.warped_nodes`; at most :func:`~tetvr.optics.tablewarp.max_warped_nodes`),
+        instead of evenly; the table's ``nodes`` then says where they are.
 
-    A node on a step of the transfer function (:func:`~tetvr.optics.table.node_limits`)
-    ends the bin below it with the step's lower side and starts the bin above with its
-    upper side, so bands of constant colour are integrated exactly.
+    A node on a step of the transfer function (:func:`~tetvr.optics.table.node_limits`) ends the bin
+    below it with the step's lower side and starts the bin above with its upper side, so bands of
+    constant colour are integrated exactly (and lookups cut segments there: :func:`_step_corners`).
 
     Examples
     --------
@@ -141,7 +141,7 @@ def build_table(
                                            optics)
     nodes, warped, width = _placed_nodes(tf, lo, hi, n_bins, n_slices, warp)
     n_bins = nodes.size
-    color, opacity, ends = _node_values(tf, nodes, optics)
+    color, opacity, ends, stepped = _node_values(tf, nodes, optics)
     tau_node, tau_bin = _extinction(opacity, u, optics, ends[2:])
     thick = _slice_thicknesses(d_max, log_base, n_slices)
 
@@ -174,7 +174,8 @@ def build_table(
     thin = None if encoding == "premultiplied" else mean_color if mean_color is not None else _thin_limit(
         color, ends[:2], tau_bin * width, tau_node, prefix)
     data, alpha_scale = _encoded(rgb, mean_tau, thin, thick, encoding, dtype, optics)
-    return _finished(data, tf, lo, hi, thick, log_base, encoding, alpha_scale, warped, optics)
+    steps = _step_corners(data, ends, u, optics, thick, encoding, alpha_scale) if stepped and warped is None else None
+    return _finished(data, tf, lo, hi, thick, log_base, encoding, alpha_scale, warped, optics, steps)
 
 
 def _checked(tf: TransferFunction, scalar_range: tuple[float, float], d_max: float, n_bins: int, n_slices: int,
@@ -219,20 +220,21 @@ def _placed_nodes(tf: TransferFunction, lo: float, hi: float, n_bins: int, n_sli
 
 
 def _node_values(tf: TransferFunction, nodes: NDArray[np.float64], optics: str) -> tuple[
-        NDArray[np.float64], NDArray[np.float64], tuple[NDArray[np.float64], ...]]:
+        NDArray[np.float64], NDArray[np.float64], tuple[NDArray[np.float64], ...], bool]:
     """The colour and opacity at each node, and at the two ends of each bin: ``(colour at
     its start, colour at its end, opacity at its start, opacity at its end)``, the values at
     the nodes but where a node sits on a step (:func:`~tetvr.optics.table.node_limits`):
-    there each bin takes the step's side it lies on, and the node itself their mean."""
+    there each bin takes the step's side it lies on, and the node itself their mean. Last,
+    whether some node sits on a step."""
     color, opacity = tf.evaluate(nodes)
     sides = None
     if optics != "vtk":  # VTK's projected tetrahedra read the colour at the vertices as it is
         sides = node_limits(tf, nodes, STEP_GAP * float(nodes[-1] - nodes[0]))
     if sides is None:
-        return color, opacity, (color[:-1], color[1:], opacity[:-1], opacity[1:])
+        return color, opacity, (color[:-1], color[1:], opacity[:-1], opacity[1:]), False
     c_below, c_above, o_below, o_above = sides
     return (0.5 * (c_below + c_above), 0.5 * (o_below + o_above),
-            (c_above[:-1], c_below[1:], o_above[:-1], o_below[1:]))
+            (c_above[:-1], c_below[1:], o_above[:-1], o_below[1:]), True)
 
 
 def _extinction(opacity: NDArray[np.float64], u: float, optics: str,
@@ -302,11 +304,42 @@ def _encoded(rgb: NDArray[np.float64], mean_tau: NDArray[np.float64], thin: NDAr
     return data, alpha_scale
 
 
+def _step_corners(data: NDArray[np.generic], ends: tuple[NDArray[np.float64], ...], u: float, optics: str,
+                  thick: NDArray[np.float64], encoding: str, alpha_scale: float) -> NDArray[np.generic] | None:
+    """A "normalized" table's corner blocks (:func:`~tetvr.optics.tablesteps.corner_blocks`)
+    from each bin's colour and opacity at its ends (``ends``, on the bin's side of the steps),
+    from which lookups read the pieces of a segment cut at the nodes
+    (:mod:`tetvr.optics.tablesteps`); None for a "premultiplied" table (whose alpha,
+    interpolated across slices, would err on the short pieces: it keeps the one lookup)."""
+    if encoding != "normalized":
+        return None
+    start, end = (_encoded_constant(c, _extinction(o, u, optics)[0], thick, data.dtype, alpha_scale)
+                  for c, o in ((ends[0], ends[2]), (ends[1], ends[3])))
+    return corner_blocks(data, start, end)
+
+
+def _encoded_constant(color: NDArray[np.float64], tau: NDArray[np.float64], thick: NDArray[np.float64],
+                      dtype: Any, alpha_scale: float) -> NDArray[np.generic]:
+    """Entries ``(K + 1, M, RGBA)`` of constant-scalar segments of colour ``color`` and
+    extinction ``tau`` (M of each), encoded as :func:`_encoded` encodes a "normalized"
+    table's diagonal."""
+    alpha = -np.expm1(-thick[:, None] * tau[None, :])[..., None]  # [k, m, 1]
+    out = np.zeros((thick.size + 1, tau.size, 4))
+    out[1:, :, :3] = np.clip(np.where(alpha > 1e-300, color[None], 0.0), 0.0, 1.0)  # (colour * alpha) / alpha
+    out[0, :, :3] = np.clip(np.where(tau[:, None] > 0, color, 0.0), 0.0, 1.0)
+    out[..., 3] = np.minimum(tau, _MAX_STORED_TAU)[None] / alpha_scale
+    if dtype == np.uint8:
+        return np.round(np.clip(out, 0.0, 1.0) * 255.0).astype(np.uint8)
+    return out.astype(dtype)
+
+
 def _finished(data: NDArray[np.generic], tf: TransferFunction, lo: float, hi: float, thick: NDArray[np.floating[Any]],
               log_base: float, encoding: str, alpha_scale: float, warped: NDArray[np.float64] | None,
-              optics: str) -> PreintegrationTable:
+              optics: str, steps: NDArray[np.generic] | None = None) -> PreintegrationTable:
     """The table of :func:`build_table`, read-only, with what its lookups need."""
     data.setflags(write=False)
+    if steps is not None:
+        steps.setflags(write=False)
     thicknesses = np.concatenate([[0.0], thick])
     optical = None
     if warped is not None:
@@ -316,7 +349,7 @@ def _finished(data: NDArray[np.generic], tf: TransferFunction, lo: float, hi: fl
         optical.setflags(write=False)
     return PreintegrationTable(data=data, scalar_range=(lo, hi), thicknesses=thicknesses,
                                log_base=float(log_base), encoding=encoding, alpha_scale=alpha_scale, nodes=warped,
-                               extinction=optical)
+                               extinction=optical, steps=steps)
 
 
 # table_for's cache (called with keywords, so every call shares one key layout).

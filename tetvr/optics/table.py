@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tetvr.optics.tablesteps import STEPS_UNIT, lookup_cut, trilinear
 from tetvr.optics.tablewarp import WARP_CELLS, max_warped_nodes, warp_cells, warp_extinction
 from tetvr.optics.transfer import TransferFunction
 
@@ -117,6 +118,10 @@ class PreintegrationTable:
         (:func:`tetvr.optics.tablewarp.extinction_cells`) and opacity per node
         (:func:`tetvr.optics.tablewarp.node_opacity_cells`): a "normalized" warped table takes its
         segments' mean extinction from them rather than from the interpolated A.
+    steps : ``(K+1, 2, 2 (N-1), 4)``, same dtype as ``data``: where the transfer function
+        steps at some nodes (:func:`node_limits`; "normalized" only), each bin's 2 x 2 corner block, its
+        diagonal on the bin's side of the steps (:func:`tetvr.optics.tablesteps.corner_blocks`);
+        lookups then cut segments at the nodes (:mod:`tetvr.optics.tablesteps`). Else None.
     """
 
     data: NDArray[np.generic]
@@ -127,6 +132,7 @@ class PreintegrationTable:
     alpha_scale: float = 1.0
     nodes: NDArray[np.float64] | None = None
     extinction: NDArray[np.float32] | None = None
+    steps: NDArray[np.generic] | None = None
 
     @property
     def n_bins(self) -> int:
@@ -183,7 +189,7 @@ class PreintegrationTable:
         k1 = self.n_slices + 1
         return dict(
             u_table=0, u_scalar_range=(lo, hi), u_optical_scale=self.alpha_scale / math.log(2.0),
-            u_table_size=(n, n, k1), u_warp=8, u_warp_cells=WARP_CELLS,
+            u_table_size=(n, n, k1), u_warp=8, u_warp_cells=WARP_CELLS, u_steps=STEPS_UNIT,
             u_lookup=(scale, offset),
             # Texture z of the fractional slice s is (s + 0.5) / (K + 1); s = x below
             # x = d / d_min = 1, s = 1 + log2(x) / log2(base) above (the texture clamps it to K).
@@ -203,11 +209,14 @@ class PreintegrationTable:
         """Premultiplied RGBA of segments, by trilinear interpolation as the GPU does it.
 
         A CPU model of the shader's lookup, used in tests to separate table error from
-        rasterisation error.
+        rasterisation error. A table with :attr:`steps` cuts each segment at the nodes
+        (:func:`tetvr.optics.tablesteps.lookup_cut`).
         """
         n = self.n_bins
         fi = self.node_coordinate(sf)
         fj = self.node_coordinate(sb)
+        if self.steps is not None:
+            return lookup_cut(fi, fj, np.asarray(thickness, dtype=np.float64), n, self._piece)
         fk = self.slice_coordinate(thickness)
         data = self.data.astype(np.float64)
         if self.data.dtype == np.uint8:
@@ -230,6 +239,20 @@ class PreintegrationTable:
             alpha = -np.expm1(-d * tau)
             return np.concatenate([out[..., :3] * alpha[..., None], alpha[..., None]], axis=-1)
         return out
+
+    def _piece(self, p: NDArray[np.float64], q: NDArray[np.float64], where: NDArray[np.int64],
+               d: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Premultiplied RGBA of pieces of a stepped table's segments (:func:`lookup_cut`):
+        a run between nodes (``where`` -1) from the table, a piece within bin ``where`` from
+        its corner block, as ``shaders/lookup_steps.glsl`` reads them."""
+        assert self.steps is not None
+        fk = self.slice_coordinate(d)
+        i = np.maximum(where, 0)
+        run = trilinear(self.data, p, q, fk)
+        block = trilinear(self.steps, 2 * i + np.clip(p - i, 0.0, 1.0), np.clip(q - i, 0.0, 1.0), fk)
+        t = np.where((where < 0)[..., None], run, block)
+        alpha = -np.expm1(-d * t[..., 3] * self.alpha_scale)
+        return np.concatenate([t[..., :3] * alpha[..., None], alpha[..., None]], axis=-1)
 
 
 def table_scalar_range(data_range: tuple[float, float], tf: TransferFunction) -> tuple[float, float]:

@@ -416,8 +416,9 @@ def load_state(
     data_directory : where to look for the data file when the path the state names does
         not exist here (ParaView writes absolute paths); the state's own folder is tried first.
     parity : render with :data:`tetvr.settings.PARITY_SETTINGS` (ParaView's "Projected
-        tetra" picture) instead of tetvr's exact default. Parity draws the volume alone:
-        the state's other sources are left out, with a warning naming them.
+        tetra" picture) instead of tetvr's exact default. The state's other sources are
+        drawn either way; in parity the volume is depth-tested against them as VTK does
+        (:mod:`tetvr.gl.vtkpt`).
     size : (width, height); default the state's view size.
 
     Examples
@@ -450,7 +451,7 @@ def load_state(
     else:
         settings = RenderSettings()
     out_size = image_size(size) if size is not None else (state.view_size or (512, 512))
-    surfaces = _other_sources(state, out_size, data_directory, parity)
+    surfaces = _other_sources(state, out_size, data_directory)
     # ParaView's range holds every visible prop.
     camera = reset_clipping_range(state.camera, union_bounds(mesh.bounds, *(s.points for s in surfaces)))
     return Scene(mesh_path=mesh_path, mesh=mesh, tf=tf, camera=camera, size=out_size, background=state.background,
@@ -458,15 +459,12 @@ def load_state(
 
 
 def _other_sources(state: ParaViewState, size: tuple[int, int],
-                   data_directory: str | os.PathLike[str] | None, parity: bool) -> tuple["Surface", ...]:
-    """The surfaces of the state's other sources; each one not drawn is warned about."""
+                   data_directory: str | os.PathLike[str] | None) -> tuple["Surface", ...]:
+    """The surfaces of the state's other sources; each one not drawn is warned about.
+    ParaView draws them as opaque geometry whatever the volume's mapper: parity draws them too."""
     from tetvr.io.meshfile import read_cells
 
     if not state.others:
-        return ()
-    if parity:
-        names = ", ".join(f"{s.name} ({s.representation})" for s in state.others)
-        warn(f"{state.path}: VTK parity draws the volume alone; left out: {names}", UserWarning)
         return ()
     surfaces, said = state_surfaces(state.others, camera=state.camera, size=size,
                                     find=lambda name: _find_data(name, state.path, data_directory),
