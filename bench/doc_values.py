@@ -209,6 +209,58 @@ def anatomy_colour() -> str:
     return _db_range([c["colour averaging: linear vs vtk reference"] for c in cases.values()])
 
 
+# ---------------------------------------------------------------- bench/first_hour.py
+def _first_hour(part: str) -> dict[str, Any]:
+    return _load(RESULTS / "first_hour.json")[part]  # type: ignore[no-any-return]
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.1f} min"
+
+
+def _where(part: dict[str, Any]) -> str:
+    m, load = part["machine"], part["loadavg_before"]
+    return (f"{m['cpu_count']} CPU cores at load average {load[0]:.1f}, {part['created'][:10]}, "
+            "`bench/results/first_hour.json`")
+
+
+def install_time() -> str:
+    """README: the test command's install into a fresh virtual environment (bench/first_hour.py)."""
+    r = _first_hour("install")
+    off, full = r["no_cache"], r["full_cache"]
+    built = off["built_from_source"]
+    largest = ", ".join(f"{name} {mb:.0f} MB" for name, mb in list(off["largest_downloads_mb"].items())[:3])
+    return (f"{_duration(off['total_s'])} with pip's cache off and {_duration(full['total_s'])} with it full "
+            f"(pip's CPU time {off['cpu_s']:.0f} s and {full['cpu_s']:.0f} s, "
+            f"{r['installed_size']['all_mb'] / 1e3:.1f} GB installed, the largest downloads {largest}); "
+            + ("no package is built from source" if not built else "built from source: " + ", ".join(built))
+            + f" ({_where(r)})")
+
+
+def extras_sizes() -> str:
+    """docs/quickstart.md: the disk each extra of the test command adds on its own."""
+    r = _first_hour("install")["installed_size"]
+    extras = sorted(r["extras"].items(), key=lambda kv: -kv[1]["only_this_extra_mb"])
+    some = [f"`{name}` adds {e['only_this_extra_mb']:.0f} MB" for name, e in extras if e["only_this_extra_mb"] >= 0.5]
+    none = [f"`{name}`" for name, e in extras if e["only_this_extra_mb"] < 0.5]
+    return (f"tetvr and its dependencies take {r['base_mb']:.0f} MB; of the test command's extras, " + ", ".join(some)
+            + (f" ({' and '.join(none)} {'needs' if len(none) == 1 else 'need'} nothing the others do not)"
+               if none else "")
+            + "; an extra's size is that of the packages only it pulls in (`bench/results/first_hour.json`)")
+
+
+def notebook_times() -> str:
+    """docs/quickstart.md: each notebook from kernel start to shutdown, as its test runs it."""
+    r = _first_hour("notebooks")
+    books = r["notebooks"]
+    wall = ", ".join(f"{rec['wall_s']:.0f} s" for rec in books.values())
+    cpu = ", ".join(f"{rec['kernel_cpu_s']:.0f} s" for rec in books.values())
+    cold = ", ".join(f"{rec['cold_shader_cache']['wall_s']:.0f} s" for rec in books.values())
+    return (f"{wall} ({'–'.join(n[:2] for n in (min(books), max(books)))}, best of {r['repeats']} runs; "
+            f"kernel CPU time {cpu}; the first run on a machine, with Mesa's shader cache empty, {cold}; "
+            f"{_where(r)})")
+
+
 def VALUES() -> dict[str, Callable[[], str]]:  # noqa: N802 - read like the TABLES dict
     """Every value a doc may quote, by name."""
     values: dict[str, Callable[[], str]] = {
@@ -216,7 +268,8 @@ def VALUES() -> dict[str, Callable[[], str]]:  # noqa: N802 - read like the TABL
         "auto_table_sizes": auto_table_sizes, "table_build": table_build, "scalar_bins_auto": scalar_bins_auto,
         "align_nodes": align_nodes, "slices_vs_fixed": slices_vs_fixed, "centroid_sort": centroid_sort,
         "large_meshes": large_meshes, "spiky_even": spiky_even, "rings_bricks": rings_bricks,
-        "anatomy_own": anatomy_own, "anatomy_convention": anatomy_convention, "anatomy_colour": anatomy_colour}
+        "anatomy_own": anatomy_own, "anatomy_convention": anatomy_convention, "anatomy_colour": anatomy_colour,
+        "install_time": install_time, "extras_sizes": extras_sizes, "notebook_times": notebook_times}
     for name in _methods():
         values[f"picture:{name}"] = (lambda n=name: picture(n))
     return values

@@ -94,3 +94,32 @@ def test_docs_quote_no_measured_decibels_by_hand():
             if not _BAR.search(around):
                 found.append(f"{path.name}: ...{text[max(0, m.start() - 40):m.end() + 10]!r}")
     assert not found, "numbers of dB written by hand (generate them, bench/doc_values.py):\n" + "\n".join(found)
+
+
+def test_first_hour_values_say_what_the_json_holds(monkeypatch):
+    """The install and notebook times in README.md and docs/quickstart.md come from
+    bench/results/first_hour.json: a package built from source is named, every notebook is
+    listed, and no value is written by hand where the docs quote them."""
+    values = _module().doc_values
+    machine = {"cpu_count": 2}
+    run = {"total_s": 600.0, "cpu_s": 90.0, "built_from_source": ["slowpkg"], "largest_downloads_mb": {"vtk": 140.0}}
+    install = {"machine": machine, "loadavg_before": [3.0], "created": "2026-11-28 00:00 UTC",
+               "no_cache": run, "full_cache": {**run, "total_s": 60.0},
+               "installed_size": {"base_mb": 200.0, "all_mb": 1500.0,
+                                  "extras": {"compare": {"only_this_extra_mb": 400.0},
+                                             "test": {"only_this_extra_mb": 5.0},
+                                             "notebooks": {"only_this_extra_mb": 0.0}}}}
+    book = {"wall_s": 12.0, "kernel_cpu_s": 8.0, "cold_shader_cache": {"wall_s": 20.0}}
+    notebooks = {"machine": machine, "loadavg_before": [3.0], "created": "2026-11-28 00:00 UTC", "repeats": 2,
+                 "notebooks": {"01_a.ipynb": book, "02_b.ipynb": {**book, "wall_s": 31.0}}}
+    monkeypatch.setattr(values, "_first_hour", {"install": install, "notebooks": notebooks}.__getitem__)
+    text = values.install_time()
+    assert text.startswith("10.0 min with pip's cache off and 60 s with it full")
+    assert "built from source: slowpkg" in text
+    sizes = values.extras_sizes()
+    assert sizes.index("`compare` adds 400 MB") < sizes.index("`test` adds 5 MB")
+    assert "(`notebooks` needs nothing" in sizes
+    assert values.notebook_times().startswith("12 s, 31 s (01–02, best of 2 runs")
+    for doc, name in ((ROOT / "README.md", "install_time"), (ROOT / "docs" / "quickstart.md", "notebook_times"),
+                      (ROOT / "docs" / "quickstart.md", "extras_sizes")):
+        assert f"<!-- value:{name} -->" in doc.read_text(), f"{doc.name} quotes {name} by hand"

@@ -1,8 +1,9 @@
 """Execute every notebook in notebooks/ and fail on any error (``pip install -e ".[notebooks]"``).
 
 Each notebook runs in a fresh kernel with notebooks/ as its working directory, on the
-bundled small data, in well under 30 s on llvmpipe. Error outputs (a cell that raised,
-or wrote a traceback) fail the test with the cell's source and the error.
+bundled small data (their times on llvmpipe: ``python bench/first_hour.py --part notebooks``,
+quoted in docs/quickstart.md). Error outputs (a cell that raised, or wrote a traceback)
+fail the test with the cell's source and the error.
 """
 
 from __future__ import annotations

@@ -897,6 +897,42 @@ def test_process_renderer_draws_what_the_renderer_draws_and_reports_its_errors()
         ProcessRenderer({"method": "auto"})
 
 
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` exists and is not a zombie."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+
+
+@pytest.mark.gl
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads process states from /proc (Linux)")
+def test_the_render_process_is_outside_its_parents_process_group_and_ends_with_it():
+    """Jupyter interrupts and shuts down a kernel by signalling the kernel's process group, and
+    ipykernel's shutdown waits for that group's children: in the group, the render process
+    died of every interrupt and held each kernel shutdown for 2.5 s. Outside it, it still
+    ends with its parent (here one that exits without releasing it)."""
+    import subprocess
+    import sys
+
+    code = ("import os, tetvr\n"
+            "from tetvr.apps.viewer.process import ProcessRenderer\n"
+            "scene = tetvr.load_scene(tetvr.demo_scene_path())\n"
+            "r = ProcessRenderer(scene.settings)\n"
+            "r.render(scene.mesh, scene.camera, scene.tf, size=(16, 12))\n"
+            "print(r._proc.pid, os.getpgid(r._proc.pid), os.getpgrp(), flush=True)\n"
+            "os._exit(0)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=ROOT,
+                         stdin=subprocess.DEVNULL)
+    assert out.returncode == 0, out.stderr
+    child, child_group, parent_group = map(int, out.stdout.split())
+    assert child_group != parent_group
+    deadline = time.monotonic() + 60
+    while _running(child) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _running(child), f"the render process {child} outlived its parent"
+
+
 def _volume():
     g = np.linspace(-1.0, 1.0, 12)
     z, y, x = np.meshgrid(g, g, g, indexing="ij")

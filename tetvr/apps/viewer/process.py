@@ -128,8 +128,12 @@ class ProcessRenderer:
         to_child_r, to_child_w = os.pipe()
         from_child_r, from_child_w = os.pipe()
         try:
+            # Its own session: Jupyter interrupts and shuts down a kernel by signalling the kernel's
+            # process group, and ipykernel's shutdown waits for that group's children to be reaped
+            # (2.5 s, then a SIGTERM to the kernel). The child ends when the pipes close instead.
             proc = subprocess.Popen([sys.executable, "-m", "tetvr.apps.viewer.process", str(to_child_r), str(from_child_w)],
-                                    pass_fds=(to_child_r, from_child_w), stdin=subprocess.DEVNULL)
+                                    pass_fds=(to_child_r, from_child_w), stdin=subprocess.DEVNULL,
+                                    start_new_session=True)
         except BaseException:
             for fd in (to_child_w, from_child_r):
                 os.close(fd)
