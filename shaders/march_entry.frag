@@ -99,7 +99,16 @@ void main() {
     if (dot(plane.xyz, d) >= 0.0) discard;  // faces away: rays leave the mesh here
     float t = plane_t(plane, o, d);
 #endif
-    if (t < u_near || t >= u_far) discard;
+    if (t >= u_far) discard;
+    if (t < u_near) {
+        // A face behind the near plane: the ray starts past it, inside the mesh, where the
+        // near plane's cells take it (NEAR_CELLS). Those give the boundary no allowance, so
+        // a point on the near plane a rounding inside a boundary face may be in none of
+        // them: the face within a rounding behind the near plane takes the ray, at u_near.
+        vec4 near_plane = face_plane(v_id >> 2, v_id & 3);
+        if (dot(near_plane.xyz, o + u_near * d) + near_plane.w < -u_tolerance) discard;
+        t = u_near;
+    }
 #if PEEL
     ivec2 px = ivec2(gl_FragCoord.xy);
     vec2 state = texelFetch(u_state, px, 0).xy;

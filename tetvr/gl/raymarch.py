@@ -71,6 +71,10 @@ OPAQUE_REMAINDER = 2.0**-20
 _BUILD_LOCK = threading.Lock()
 
 
+#: OpenGL's GL_DEPTH_CLAMP (moderngl names no flag for it).
+GL_DEPTH_CLAMP = 0x864F
+
+
 def _prefetch(mesh: TetMesh) -> Future[tuple[DistinctCells, MarchRecords]]:
     """:func:`_records` of ``mesh``, built in a daemon thread."""
     future: Future[tuple[DistinctCells, MarchRecords]] = Future()
@@ -378,6 +382,9 @@ class Marcher:
         # The first march pass's targets keep what a pixel no ray enters shows (its state:
         # done), since the pass runs only where the entry pass leaves a depth below 1.
         near_ids, rects = near_plane_cells(mesh, camera, size[0] / size[1])
+        # A pixel wider on every side: the rasteriser may leave out a pixel whose centre lies
+        # within its snapping of a rectangle's edge; the fragments test the tet exactly.
+        rects = np.clip(rects + np.array([-2.0 / size[0], -2.0 / size[1], 2.0 / size[0], 2.0 / size[1]]), -1.0, 1.0)
         t["fbo_a"].clear(*((3.0e38, -3.0e38, 0.0, 0.0) if extent else (0.0, 0.0, 0.0, 0.0)), depth=1.0)
         t["entry_fbo"].use()
         ctx.enable(moderngl.DEPTH_TEST)
@@ -559,6 +566,11 @@ class Marcher:
 
         self.ctx.front_face = "ccw"
         self.ctx.enable(moderngl.CULL_FACE)
+        # No clipping at the near plane: a face it cuts is drawn whole, and the shader keeps
+        # what lies past it. Clipped by the GL, a ray entering within a rounding past the
+        # near plane lay on the clipped edge, which the rasteriser may leave out, and started
+        # in none of the near plane's cells either (it is a rounding outside them).
+        self.ctx.enable_direct(GL_DEPTH_CLAMP)
         if rim is not None:
             vao = self.ctx.vertex_array(prog, [(self._faces[0], "3f", "in_pos"), (self._faces[1], "1i", "in_id")],
                                         index_buffer=rim.drawn, index_element_size=4)
@@ -567,6 +579,7 @@ class Marcher:
             vao.release()
         else:
             self._faces_vao(prog).render(moderngl.TRIANGLES)
+        self.ctx.disable_direct(GL_DEPTH_CLAMP)
         self.ctx.disable(moderngl.CULL_FACE)
 
     def _faces_vao(self, prog: Any) -> Any:
