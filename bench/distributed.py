@@ -27,6 +27,17 @@ Six parts, each written to ``<out>/distributed.json`` (and charts, ``distributed
   and bluntfin (when ``../shared`` has it), P = 2, 4, 8, perspective / parallel / inside,
   both methods: the composite's max abs difference from the single-process image, and
   its PSNR against the CPU reference minus the single image's.
+* **big** (``--only big``, not in the default run) -- one mesh of ~10M tets (``--big``) from
+  solver pieces, in one run: the rotated grid cube written as 8 ``.vtu`` pieces by the
+  workers (as a solver writes its parts), made into 8 k-d bricks on them
+  (:func:`tetvr.cluster.distributed.distribute_pieces` of a ``file://`` URL: the client never
+  reads a piece) and rendered there, composited on the workers; then the same frames by one
+  process holding the whole mesh (the largest grid that fits, where the whole would not).
+  The scheduler and the 2 workers are processes of their own (``dask scheduler``,
+  ``dask worker --no-nanny``), so each one's peak resident memory (VmHWM) is its own; all
+  share this machine's cores. First frame, time per view change, their ratio to the single
+  process, the composite's max abs difference from its image, each process's peak memory
+  (``distributed_big.png``).
 
 Ratios carry between machines; seconds are this machine's (llvmpipe; ``machine`` in the
 JSON says how many cores). The projection to 64 / 1,024 workers and 10^9 tets in
@@ -40,6 +51,7 @@ Usage::
 
     python bench/distributed.py [--quick] [--tets 1e6[,1e7]] [--rounds R] [--only compositing,frames]
                                 [--out bench/results]
+    python bench/distributed.py --only big [--big 1e7] [--big-size 512] [--views 3]
 """
 
 from __future__ import annotations
@@ -390,6 +402,351 @@ def frames(args: argparse.Namespace) -> dict:
     return out
 
 
+# ---- --big: one mesh of ~10M tets from solver pieces, on a cluster of processes, against one process ----
+
+#: The big run's bricks and solver pieces.
+BIG_BRICKS = 8
+BIG_PIECES = 8
+#: What the single process is estimated to take per tet (the mesh and its generation's
+#: temporaries, ~330 B, and tet marching's records, MARCH_BYTES_PER_TET), to decide
+#: before the run whether it fits; and the memory left free below which a watchdog kills
+#: a run of this benchmark rather than let the machine swap or the kernel kill at random.
+BIG_BYTES_PER_TET = 1330
+BIG_MEMORY_FLOOR = 1.5 * 2**30
+
+
+def _proc_status_mib(key: str) -> float:
+    """A ``/proc/self/status`` memory line in MiB (``VmHWM``: peak resident, ``VmRSS``: now)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(key + ":"):
+            return float(line.split()[1]) / 1024.0  # kB
+    return float("nan")
+
+
+def _rss_mib() -> float:
+    return _proc_status_mib("VmRSS")
+
+
+def _reset_peak_rss() -> float:
+    """Start this process's peak resident memory again from what it holds now (Linux
+    ``clear_refs`` 5), so a later peak is that of what follows. Returns the peak before."""
+    peak = _peak_rss_mib()
+    Path("/proc/self/clear_refs").write_text("5")
+    return peak
+
+
+def _available() -> int:
+    from tetvr.core.image import available_memory
+
+    return available_memory() or 0
+
+
+class _Watchdog:
+    """Polls the memory the system has left while a phase runs; below ``floor`` bytes it
+    kills ``pids()`` (processes this benchmark started) and says so. Keeps the least seen."""
+
+    def __init__(self, pids, floor: float = BIG_MEMORY_FLOOR) -> None:
+        import threading
+
+        self.pids, self.floor, self.killed, self.least = pids, floor, False, float("inf")
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._poll, daemon=True)
+
+    def _poll(self) -> None:
+        import signal
+
+        while not self._stop.wait(0.25):
+            left = _available()
+            self.least = min(self.least, left)
+            if left < self.floor and not self.killed:
+                self.killed = True
+                print(f"!! {left / 2**30:.1f} GiB of memory left: killing {self.pids()}", flush=True)
+                for pid in self.pids():
+                    try:
+                        os.kill(pid, signal.SIGKILL)
+                    except ProcessLookupError:
+                        pass
+
+    def __enter__(self) -> "_Watchdog":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
+def _grid_piece(n: int, i0: int, i1: int):
+    """The hexes i0 <= i < i1 (along the first grid axis) of ``synthetic.cube(n)``'s
+    rotated grid, 6 tets each: (points, tets, scalars). Points and field are computed
+    element by element (no matrix product, whose rounding may depend on the array's
+    shape), so the pieces' shared points are bitwise equal and the whole mesh,
+    ``_grid_piece(n, 0, n)``, is the pieces' union."""
+    from tetvr.mesh.synthetic import _KUHN, _rotation
+
+    g = np.linspace(-0.5, 0.5, n + 1)
+    x, y, z = (a.ravel() for a in np.meshgrid(g[i0:i1 + 1], g, g, indexing="ij"))
+    rot = _rotation(0.5, 0.35)
+    pts = np.stack([x * rot[0, j] + y * rot[1, j] + z * rot[2, j] for j in range(3)], axis=1)
+    del x, y, z
+    scalars = 0.6 * pts[:, 0] + 0.3 * pts[:, 1] - 0.4 * pts[:, 2] + 0.5  # synthetic.cube's field
+    idx = np.arange(pts.shape[0]).reshape(i1 - i0 + 1, n + 1, n + 1)
+    i, j, k = (a.ravel() for a in np.meshgrid(np.arange(i1 - i0), np.arange(n), np.arange(n), indexing="ij"))
+    corners = np.stack([idx[i + (c & 1), j + (c >> 1 & 1), k + (c >> 2 & 1)] for c in range(8)], axis=1)
+    return pts, corners[:, _KUHN].reshape(-1, 4), scalars
+
+
+def _write_piece(folder: str, n: int, i0: int, i1: int, k: int) -> int:
+    """Piece ``k`` of the big grid written as ``piece_k.vtu`` (on a worker, as a solver
+    writes its part): its tet count."""
+    import meshio
+
+    pts, tets, scalars = _grid_piece(n, i0, i1)
+    meshio.Mesh(pts, [("tetra", tets)], point_data={"f": scalars}).write(
+        os.path.join(folder, f"piece_{k}.vtu"), binary=True, compression=None)
+    return len(tets)
+
+
+def _write_pieces(c, folder: str, n: int, n_pieces: int) -> str:
+    """The big grid as ``big.pvtu`` of ``n_pieces`` slabs, each written by a worker: its URL."""
+    cuts = np.linspace(0, n, n_pieces + 1).round().astype(int)
+    futs = [c.submit(_write_piece, folder, n, int(cuts[k]), int(cuts[k + 1]), k, pure=False) for k in range(n_pieces)]
+    c.gather(futs)
+    rows = "".join(f'<Piece Source="piece_{k}.vtu"/>' for k in range(n_pieces))
+    with open(os.path.join(folder, "big.pvtu"), "w") as f:
+        f.write('<VTKFile type="PUnstructuredGrid"><PUnstructuredGrid GhostLevel="0"><PPointData>'
+                '<PDataArray type="Float64" Name="f"/></PPointData><PPoints><PDataArray type="Float64" '
+                'NumberOfComponents="3"/></PPoints>' + rows + "</PUnstructuredGrid></VTKFile>")
+    return "file://" + os.path.join(folder, "big.pvtu")
+
+
+def _start_cluster(folder: str, n_workers: int):
+    """A Dask scheduler and ``n_workers`` workers (one thread each, no nanny, no memory
+    limit: nothing spilled to disk), each its own process on this machine as
+    ``dask scheduler`` / ``dask worker`` start them, so that each one's memory is its own:
+    (client, processes)."""
+    import subprocess
+
+    import distributed
+
+    dask = str(Path(sys.executable).with_name("dask"))
+    spec = os.path.join(folder, "scheduler.json")
+    log = open(os.path.join(folder, "cluster.log"), "w")
+    procs = [subprocess.Popen([dask, "scheduler", "--scheduler-file", spec, "--port", "0", "--no-dashboard"],
+                              stdout=log, stderr=subprocess.STDOUT)]
+    for _ in range(600):
+        if os.path.isfile(spec):
+            break
+        time.sleep(0.1)
+    else:
+        procs[0].kill()
+        raise RuntimeError(f"the Dask scheduler did not start in 60 s: see {log.name}")
+    procs += [subprocess.Popen([dask, "worker", "--scheduler-file", spec, "--nthreads", "1", "--no-nanny",
+                                "--memory-limit", "0", "--no-dashboard", "--name", f"w{k}"],
+                               stdout=log, stderr=subprocess.STDOUT) for k in range(n_workers)]
+    try:
+        client = distributed.Client(scheduler_file=spec, timeout=120)
+        client.wait_for_workers(n_workers, timeout=120)
+    except Exception:
+        for p in procs:
+            p.kill()
+        raise
+    return client, procs
+
+
+def _stop_cluster(client, procs) -> None:
+    """Close the scheduler and its workers (a worker without a nanny outlives SIGTERM
+    while its scheduler is gone: what is still running after 30 s is killed)."""
+    import contextlib
+
+    with contextlib.suppress(Exception):
+        client.shutdown()
+    with contextlib.suppress(Exception):
+        client.close()
+    for p in procs:
+        try:
+            p.wait(timeout=30)
+        except Exception:
+            p.kill()
+            p.wait()
+
+
+def _big_cluster(args: argparse.Namespace, n: int, folder: str) -> tuple[dict, list, list, object]:
+    """The big mesh written as pieces by the workers, made into bricks on them
+    (``distribute_pieces``) and rendered there, composited on the workers: times, bytes
+    the client receives, each process's peak memory; the frames, views and transfer function."""
+    from tetvr import RenderSettings, TransferFunction
+    from tetvr.apps.animate import orbit
+    from tetvr.cluster.distributed import distribute_pieces
+    from tetvr.core.camera import Camera
+
+    size = (args.big_size, args.big_size)
+    client, procs = _start_cluster(folder, 2)
+    out: dict = {"workers": 2, "bricks": BIG_BRICKS, "pieces": BIG_PIECES, "size": list(size),
+                 "load_average_1_5_15_min": {"start": os.getloadavg()}}
+    try:
+        with _Watchdog(lambda: [p.pid for p in procs]) as dog:
+            t = time.perf_counter()
+            url = _write_pieces(client, folder, n, BIG_PIECES)
+            out["write_pieces_s"] = time.perf_counter() - t
+            out["pieces_bytes"] = sum(os.path.getsize(os.path.join(folder, f"piece_{k}.vtu"))
+                                      for k in range(BIG_PIECES))
+            out["worker_peak_rss_mib_writing_pieces"] = sorted(client.run(_reset_peak_rss).values())
+            _reset_peak_rss()  # the client's peak from here on
+            client.run_on_scheduler(_reset_peak_rss)
+            t = time.perf_counter()
+            bricks = distribute_pieces(url, BIG_BRICKS, client)
+            out["distribute_s"] = time.perf_counter() - t
+            out["worker_peak_rss_mib_distribute"] = sorted(client.run(_peak_rss_mib).values())
+            out["n_tets"] = int(bricks.whole.n_tets)
+            out["brick_tets"] = [bricks.brick_tets[i] for i in sorted(bricks.brick_tets)]
+            lo, hi = bricks.whole.scalar_range
+            tf = TransferFunction.preset("viridis", (lo, hi), opacity=0.5, unit_distance=0.2)
+            views = orbit(Camera.fit(bricks.whole), 1 + args.views, degrees=40.0)
+            out["method"] = bricks.settings_for(RenderSettings(), views[0], size).method
+            images, times = [], []
+            for cam in views:
+                before = client.run(_transfer_log)
+                t = time.perf_counter()
+                images.append(bricks.render(cam, tf, size=size))
+                times.append(time.perf_counter() - t)
+                out.setdefault("client_received_bytes", []).append(_moved(client, before)[0])
+                print(f"big, {BIG_BRICKS} bricks on 2 workers: frame {len(times)} {times[-1]:.1f} s", flush=True)
+            out["first_frame_s"], out["view_change_s"] = times[0], times[1:]
+            out["view_change_median_s"] = float(np.median(times[1:]))
+            out["worker_rss_mib_held"] = sorted(client.run(_rss_mib).values())
+            out["worker_peak_rss_mib"] = sorted(client.run(_peak_rss_mib).values())
+            out["scheduler_peak_rss_mib"] = client.run_on_scheduler(_peak_rss_mib)
+            out["client_peak_rss_mib"] = _peak_rss_mib()
+            out["load_average_1_5_15_min"]["end"] = os.getloadavg()
+            bricks.release()
+        out["least_available_gib"] = dog.least / 2**30
+        if dog.killed:
+            raise MemoryError(f"the cluster's processes were killed: under {BIG_MEMORY_FLOOR / 2**30:.1f} GiB left")
+    finally:
+        _stop_cluster(client, procs)
+    return out, images, views, tf
+
+
+def _single_run(n: int, views: list, tf, size: tuple[int, int], method: str, folder: str) -> None:
+    """In a process of its own: the whole grid made here and rendered with the views; its
+    times, peak memory and frames written to ``folder``."""
+    import json
+
+    from tetvr import RenderSettings, TetMesh
+    from tetvr.gl import Renderer
+
+    t = time.perf_counter()
+    mesh = TetMesh.from_arrays(*_grid_piece(n, 0, n))
+    made = time.perf_counter() - t
+    times, images = [], []
+    with Renderer(RenderSettings(method=method)) as r:
+        for cam in views:
+            t = time.perf_counter()
+            images.append(r.render(mesh, cam, tf, size=size))
+            times.append(time.perf_counter() - t)
+            print(f"big, one process: frame {len(times)} {times[-1]:.1f} s", flush=True)
+    np.save(os.path.join(folder, "single.npy"), np.stack(images))
+    Path(folder, "single.json").write_text(json.dumps({
+        "n_tets": mesh.n_tets, "make_s": made, "first_frame_s": times[0], "view_change_s": times[1:],
+        "peak_rss_mib": _peak_rss_mib()}))
+
+
+def _big_single(n: int, views: list, tf, size: tuple[int, int], method: str, folder: str) -> tuple[dict, object]:
+    """:func:`_single_run` in a spawned process, killed if memory runs low."""
+    import json
+    import multiprocessing
+
+    proc = multiprocessing.get_context("spawn").Process(target=_single_run, args=(n, views, tf, size, method, folder))
+    load = {"start": os.getloadavg()}
+    with _Watchdog(lambda: [proc.pid]) as dog:
+        proc.start()
+        proc.join()
+    load["end"] = os.getloadavg()
+    if dog.killed or proc.exitcode != 0:
+        return {"failed": f"exit code {proc.exitcode}" + (", killed: memory ran low" if dog.killed else ""),
+                "least_available_gib": dog.least / 2**30}, None
+    out = json.loads(Path(folder, "single.json").read_text())
+    out["view_change_median_s"] = float(np.median(out["view_change_s"]))
+    out["least_available_gib"] = dog.least / 2**30
+    out["method"] = method
+    out["load_average_1_5_15_min"] = load
+    return out, np.load(os.path.join(folder, "single.npy"))
+
+
+def big(args: argparse.Namespace) -> dict:
+    """One run: the ~``args.big``-tet grid from solver pieces as 8 bricks on a cluster of
+    2 worker processes (and a scheduler process), then the same frames by one process
+    (the largest grid that fits where the whole one would not), the ratio and the
+    composite's difference from the single image."""
+    _reset_peak_rss()
+    n = max(2, round((args.big / 6) ** (1 / 3)))
+    start = {"available_gib": _available() / 2**30, "load_average_1_5_15_min": os.getloadavg()}
+    with tempfile.TemporaryDirectory(prefix="tetvr-big-") as folder:
+        cluster, frames, views, tf = _big_cluster(args, n, folder)
+        size = tuple(cluster["size"])
+        # The single process needs the whole mesh and its records: the largest grid that fits.
+        room = _available() - 2 * BIG_MEMORY_FLOOR
+        n_single = n
+        while n_single > 2 and 6 * n_single**3 * BIG_BYTES_PER_TET > room:
+            n_single -= 1
+        single, images = _big_single(n_single, views, tf, size, cluster["method"], folder)
+    out: dict = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "grid_n": n,
+                 "start": start, "cluster": cluster, "single": single,
+                 "single_same_mesh": n_single == n, "load_average_end": os.getloadavg(),
+                 "estimated_single_bytes_per_tet": BIG_BYTES_PER_TET}
+    if n_single != n:
+        out["single_note"] = (f"the whole {cluster['n_tets']:,}-tet mesh would not fit in one process here "
+                              f"({start['available_gib']:.1f} GiB available): measured at "
+                              f"{single.get('n_tets', 0):,} tets")
+    if images is not None and n_single == n:
+        diff = np.abs(np.stack(frames) - images)
+        out["accuracy"] = {"max_abs_diff": float(diff.max()),
+                           "max_abs_diff_per_view": diff.max(axis=(1, 2, 3)).tolist(),
+                           "pixels_over_1e-5": int((diff.max(axis=-1) > 1e-5).sum()),
+                           "pixels_over_1_255": int((diff.max(axis=-1) > 1 / 255).sum()),
+                           "pixels": int(diff.shape[0] * diff.shape[1] * diff.shape[2])}
+        out["ratio"] = {"first_frame": single["first_frame_s"] / cluster["first_frame_s"],
+                        "view_change": single["view_change_median_s"] / cluster["view_change_median_s"]}
+    print(f"big: {cluster['n_tets']:,} tets: cluster first {cluster['first_frame_s']:.1f} s, view "
+          f"{cluster['view_change_median_s']:.1f} s; one process {single}", flush=True)
+    return out
+
+
+def chart_big(result: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    b = result["big"]
+    c, s = b["cluster"], b["single"]
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    one = f"one process ({s['n_tets'] / 1e6:.1f}M tets)" if "n_tets" in s else "one process (failed)"
+    labels = ["first frame", "per view change"]
+    x = np.arange(2)
+    ax[0].bar(x - 0.2, [c["first_frame_s"], c["view_change_median_s"]], 0.4, color="#2a9d8f",
+              label=f"{c['bricks']} bricks on {c['workers']} workers")
+    if "n_tets" in s:
+        ax[0].bar(x + 0.2, [s["first_frame_s"], s["view_change_median_s"]], 0.4, color="#888", label=one)
+    ax[0].set_xticks(x, labels)
+    ax[0].set_ylabel("s")
+    ax[0].set_title(f"{c['n_tets'] / 1e6:.1f}M tets at {c['size'][0]}x{c['size'][1]} ({c['method']})")
+    ax[0].legend()
+    names = (["client", "scheduler"] + [f"worker {k}" for k in range(len(c["worker_peak_rss_mib"]))]
+             + (["one process"] if "peak_rss_mib" in s else []))
+    peaks = ([c["client_peak_rss_mib"], c["scheduler_peak_rss_mib"], *c["worker_peak_rss_mib"]]
+             + ([s["peak_rss_mib"]] if "peak_rss_mib" in s else []))
+    ax[1].bar(names, [p / 1024 for p in peaks], color=["#3b75af", "#3b75af"] + ["#2a9d8f"] * len(
+        c["worker_peak_rss_mib"]) + ["#888"] * ("peak_rss_mib" in s))
+    ax[1].set_ylabel("peak resident memory, GiB")
+    ax[1].set_title("peak memory per process")
+    fig.suptitle(f"one mesh from {c['pieces']} solver pieces, on a cluster against one process "
+                 f"({result['machine'].get('cpu_count', '?')} cores shared by all, {b['date'][:10]})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
 def chart_compositing(result: dict, path: Path) -> None:
     import matplotlib
 
@@ -469,7 +826,10 @@ def main() -> None:
     ap.add_argument("--bricks-p", default="1,2,4,8", help="brick counts (default 1,2,4,8)")
     ap.add_argument("--views", type=int, default=3, help="view changes timed after the first frame (default 3)")
     ap.add_argument("--composite-p", default="2,4,8,16", help="brick counts for compositing (default 2,4,8,16)")
-    ap.add_argument("--only", default="series,composite,bricks,accuracy,compositing,frames", help="parts to run")
+    ap.add_argument("--only", default="series,composite,bricks,accuracy,compositing,frames",
+                    help="parts to run (and big: --only big)")
+    ap.add_argument("--big", type=float, default=1e7, help="tets of the big run (default 1e7)")
+    ap.add_argument("--big-size", type=int, default=512, help="the big run's image side (default 512)")
     ap.add_argument("--out", default=str(_HERE / "results"))
     args = ap.parse_args()
     common = _common()
@@ -481,7 +841,7 @@ def main() -> None:
         result = json.loads(path.read_text())
     only = args.only.split(",")
     result["machine"] = common.machine()
-    own_date = {"accuracy", "compositing", "frames"}  # parts that carry their own date
+    own_date = {"accuracy", "compositing", "frames", "big"}  # parts that carry their own date
     if set(only) - own_date:  # the date of the other timed parts
         result["date"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     load = {"start": os.getloadavg()}  # other jobs on the machine: what the seconds shared it with
@@ -505,12 +865,16 @@ def main() -> None:
         result["frames"]["date"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     if "accuracy" in only:
         result["accuracy"] = accuracy(args)
+    if "big" in only:
+        result["big"] = big(args)
     load["end"] = os.getloadavg()
     if set(only) - own_date:  # the load the timed parts shared the machine with
         result["load_average_1_5_15_min"] = load
     common.write_json(path, result)
     if all(k in result for k in ("series", "bricks")):
         chart(result, path.with_suffix(".png"))
+    if "big" in result:
+        chart_big(result, path.with_name("distributed_big.png"))
     if "compositing" in result:
         chart_compositing(result, path.with_name("distributed_compositing.png"))
     print(f"-> {path}")

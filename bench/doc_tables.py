@@ -256,6 +256,58 @@ def distributed_accuracy() -> str:
             f"over the 27 (`bench/results/distributed.json`{when}).\n\n" + "\n".join(rows))
 
 
+def _big_load(b: dict[str, Any]) -> str:
+    """The 1-minute load average the big run's phases started and ended with (other jobs
+    on the machine: what the seconds shared it with)."""
+    phases = [(name, b[key].get("load_average_1_5_15_min")) for name, key in (("the cluster", "cluster"),
+                                                                               ("the one process", "single"))]
+    if not all(load for _, load in phases):
+        return f"load average {b['start']['load_average_1_5_15_min'][0]:.0f} at the start"
+    return "load average " + ", ".join(f"{load['start'][0]:.1f} to {load['end'][0]:.1f} over {name}"
+                                       for name, load in phases)
+
+
+def distributed_big() -> str:
+    """One mesh of ~10M tets from solver pieces: bricks on a cluster of processes against
+    one process, in one run (bench/distributed.py --only big)."""
+    r = _dist()
+    b = r["big"]
+    c, s = b["cluster"], b["single"]
+    w, h = c["size"]
+    one = "one process" + ("" if b["single_same_mesh"] else f" ({s.get('n_tets', 0):,} tets)")
+    rows = ["| | first frame s | per view change s (median of views) | peak resident memory MiB |",
+            "|---|---:|---:|---|"]
+    workers = " / ".join(f"{m:.0f}" for m in c["worker_peak_rss_mib"])
+    rows.append(f"| {c['bricks']} bricks on {c['workers']} workers | {c['first_frame_s']:.1f} "
+                f"| {c['view_change_median_s']:.1f} ({len(c['view_change_s'])}) | workers {workers}; scheduler "
+                f"{c['scheduler_peak_rss_mib']:.0f}; client {c['client_peak_rss_mib']:.0f} |")
+    if "first_frame_s" in s:
+        rows.append(f"| {one} | {s['first_frame_s']:.1f} | {s['view_change_median_s']:.1f} "
+                    f"({len(s['view_change_s'])}) | {s['peak_rss_mib']:.0f} |")
+    else:
+        rows.append(f"| {one} | failed: {s.get('failed', '?')} | | |")
+    if "ratio" in b:
+        rows.append(f"| one process's time / the bricks' | {b['ratio']['first_frame']:.2f} "
+                    f"| {b['ratio']['view_change']:.2f} | |")
+    text = (f"{c['n_tets']:,} tets (the rotated grid cube), written by the workers as {c['pieces']} `.vtu` pieces "
+            f"and made into {c['bricks']} k-d bricks on them by `distribute_pieces` from a `file://` URL, so the "
+            f"client reads no piece ({c['distribute_s']:.0f} s; each worker's peak "
+            f"{max(c['worker_peak_rss_mib_distribute']):.0f} MiB by then); {w}x{h}, {c['method']}, composited on "
+            f"the workers (the client received {max(c['client_received_bytes']) / 2**20:.0f} MiB a frame). The "
+            f"scheduler and the {c['workers']} workers are processes of their own, and with the client and, after "
+            f"them, the one process rendering the same frames, they share the same "
+            f"{r['machine'].get('cpu_count', '?')} cores ({b['date'][:10]}, {_big_load(b)}; "
+            f"`bench/results/distributed.json`, chart `bench/results/distributed_big.png`).")
+    if "accuracy" in b:
+        a = b["accuracy"]
+        text += (f" The composite against the one process's image: at most {a['max_abs_diff']:.1e} per pixel, "
+                 f"{a['pixels_over_1_255']} of the {a['pixels']:,} pixels of the {len(a['max_abs_diff_per_view'])} frames "
+                 f"beyond 1/255 ({a['pixels_over_1e-5']} beyond 1e-5).")
+    if "single_note" in b:
+        text += f" {b['single_note'][0].upper()}{b['single_note'][1:]}."
+    return text + "\n\n" + "\n".join(rows)
+
+
 #: What the projection assumes beyond the measurements.
 PROJECTION_PIXELS = 1024 * 1024
 PROJECTION_LINK_BYTES_PER_S = 1.25e9  # 10 Gb/s Ethernet
@@ -660,6 +712,7 @@ TABLES: dict[str, Callable[[], str]] = {"imperfect_meshes": imperfect_meshes, "f
                                         "spiky_tf": spiky_tf, "degenerate": degenerate,
                                         "distributed_series": distributed_series,
                                         "distributed_bricks": distributed_bricks,
+                                        "distributed_big": distributed_big,
                                         "distributed_accuracy": distributed_accuracy,
                                         "distributed_projection": distributed_projection,
                                         "distributed_compositing": distributed_compositing,
