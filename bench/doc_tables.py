@@ -705,11 +705,25 @@ def frame_memory() -> str:
             + "\n".join(tets))
 
 
+def grazing() -> str:
+    """Cameras beside the boundary of a mesh and its bricks (bench/grazing.py)."""
+    r = _load("grazing.json")
+    rows = ["| mesh | tets | cells cut by the bricks | views | whole mesh: worst error | views beyond 1/255 "
+            "| 8 bricks composited: worst error | views beyond 1/255 |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for name, m in r["meshes"].items():
+        n = {key: len({b["trial"] for b in m["beyond"] if b["image"] == key}) for key in ("whole", "bricks")}
+        rows.append(f"| {name} | {m['n_tets']:,} | {m['cut_cells']:,} | {m['trials']} | {m['worst']['whole']:.1e} "
+                    f"| {n['whole']} | {m['worst']['bricks']:.1e} | {n['bricks']} |")
+    size = "x".join(str(v) for v in r["size"])
+    return (f"Measured by `bench/grazing.py` at {size} with the defaults, against `method=\"reference\"` "
+            f"({r['date'][:10]}, `bench/results/grazing.json`).\n\n" + "\n".join(rows))
+
+
 TABLES: dict[str, Callable[[], str]] = {"imperfect_meshes": imperfect_meshes, "frame_memory": frame_memory, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
                                         "compare_demo": compare_demo,
                                         "viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages,
                                         "volume_accuracy": volume_accuracy,
-                                        "spiky_tf": spiky_tf, "degenerate": degenerate,
+                                        "spiky_tf": spiky_tf, "degenerate": degenerate, "grazing": grazing,
                                         "distributed_series": distributed_series,
                                         "distributed_bricks": distributed_bricks,
                                         "distributed_big": distributed_big,
