@@ -206,6 +206,9 @@ class Marcher:
         for obj in [*self._vaos.values(), *self._textures.values(), *self._faces]:
             obj.release()
         self._vaos.clear()
+        from tetvr.gl.util import drop_targets  # new targets too: kept across a change of mesh, llvmpipe
+
+        drop_targets(self.ctx, self._targets)  # ran every later frame ~10x slower (bricks drawn in turn)
         pending, self._prefetch = self._prefetch, None
         distinct, rec = pending[1].result() if pending is not None and pending[0] is mesh else _records(mesh)
         given, mesh = mesh, distinct.mesh
@@ -386,6 +389,7 @@ class Marcher:
         # within its snapping of a rectangle's edge; the fragments test the tet exactly.
         rects = np.clip(rects + np.array([-2.0 / size[0], -2.0 / size[1], 2.0 / size[0], 2.0 / size[1]]), -1.0, 1.0)
         t["fbo_a"].clear(*((3.0e38, -3.0e38, 0.0, 0.0) if extent else (0.0, 0.0, 0.0, 0.0)), depth=1.0)
+        self._clear_entries(t)  # not read where no entry is drawn, but left stale llvmpipe marched 3-4x slower
         t["entry_fbo"].use()
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.depth_func = "<"
