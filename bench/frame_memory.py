@@ -14,7 +14,7 @@ test_frame_memory.py`` checks). The scene is a 3x3x3 cube (``synthetic.cube(3)``
 the volume ray caster; "annotate" is the legend and PNG that ``tetvr render`` writes,
 "png" the plain PNG, each beyond the frame's image. "context" is what a renderer and its
 first small frame take. Memory per tet: cubes of about 100k and 400k tets at 256x256,
-what the mesh holds and what its first frame adds (tet marching's records, projected
+what the mesh holds (its arrays' bytes) and what its first frame adds (tet marching's records, projected
 tetrahedra's buffers and sort), fitted over the two sizes. Linux only (``/proc``).
 """
 
@@ -74,11 +74,12 @@ elif kind in ("raymarch", "projected"):
         r.render(mesh, Camera.fit(mesh), tf, size=(64, 64))
         before = start()
         if spec.get("n", 3) > 3:  # memory per tet: what the mesh holds, then the frame's peak over it
-            held = status("VmRSS")
             mesh = synthetic.cube(spec["n"])
             tf = default_transfer_function(mesh, opacity=0.3)
             out["n_tets"] = mesh.n_tets
-            out["mesh_held"] = status("VmRSS") - held
+            # What its arrays hold: the resident growth says little once freed memory is reused.
+            out["mesh_held"] = sum(a.nbytes for a in (mesh.points, mesh.tets, mesh.scalars, mesh.cell_scalars)
+                                   if a is not None)
             held = start()[0]
         r.render(mesh, Camera.fit(mesh), tf, size=size)
         if spec.get("n", 3) > 3:

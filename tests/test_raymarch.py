@@ -208,6 +208,28 @@ def test_records_built_beside_the_table_are_taken_or_dropped():
         assert r._marcher is not None and r._marcher._prefetch is None and r._marcher._records is None
 
 
+def test_records_go_to_the_gl_in_blocks_and_leave_the_host(monkeypatch):
+    """The per-tet records are built and written a block of tets at a time (here three
+    blocks of 4096, the last part of a row): the same image as from one block. Once they
+    are on the GL the host keeps none of them (the textures are the only copy a view reads,
+    rebuilt from the mesh if needed), nor the face adjacency's planes of every face."""
+    from tetvr.mesh import adjacency
+
+    mesh = synthetic.cube(12)  # 10,368 tets
+    cam = Camera.fit(mesh, direction=(0.4, -0.3, 1.0))
+    images = []
+    for block in (adjacency.BLOCK_TETS, 4096):
+        monkeypatch.setattr(adjacency, "BLOCK_TETS", block)
+        with tetvr.Renderer(RenderSettings(method="raymarch")) as r:
+            images.append(r.render(mesh, cam, _tf(mesh), size=(64, 64)))
+            rec = r._marcher._records
+            assert rec.planes is None and rec.scalar is None and rec.links is None and rec.ids is None
+            assert rec.boundary_slots.size > 0
+    assert len(adjacency.blocks(mesh.n_tets)) == 3 and images[0][..., 3].max() > 0.1
+    assert np.array_equal(images[0], images[1])
+    assert "normals" not in vars(adjacency.face_adjacency(mesh))
+
+
 def test_method_setting():
     with pytest.raises(ValueError, match="method must be one of"):
         RenderSettings(method="marching")

@@ -1,15 +1,19 @@
 """Images out: premultiplied float RGBA -> PNG, with no imaging dependency; files
-written atomically; the memory an image of a given size may take."""
+written atomically; the memory an image of a given size may take, and the memory a spike
+of temporaries leaves behind given back."""
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import errno
+import functools
 import io
 import os
 import secrets
 import stat
 import struct
+import sys
 import zlib
 from typing import IO, Any, Iterator, Sequence
 
@@ -17,7 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["image_size", "write_png", "png_bytes", "to_rgba8", "composite_over", "psnr", "rmse",
-           "atomic_output", "available_memory", "check_memory"]
+           "atomic_output", "available_memory", "check_memory", "release_free_memory"]
 
 #: Rows of a PNG converted at once: bounds the float64 temporaries of a large image.
 _PNG_BLOCK_BYTES = 64 << 20
@@ -221,6 +225,31 @@ def check_memory(need: int, what: str) -> None:
     have = available_memory()
     if have is not None and need > have:
         raise MemoryError(f"{what} needs about {_gib(need)} of memory; {_gib(have)} is available")
+
+
+def release_free_memory() -> bool:
+    """Give the C heap's free pages back to the system (glibc's ``malloc_trim``; elsewhere
+    nothing), and say whether any were. numpy takes arrays of up to 32 MB from the heap,
+    and glibc keeps the pages they leave free resident (up to 64 MB at the top of each
+    thread's arena, and every free page between live blocks); a later array of more than
+    32 MB, or the GL's textures, cannot use them. Called once after a spike of temporaries
+    (a new mesh's walk check and records), not per frame, as Dask advises for its workers.
+
+    >>> isinstance(release_free_memory(), bool)
+    True
+    """
+    trim = _malloc_trim()
+    return bool(trim(0)) if trim is not None else False
+
+
+@functools.lru_cache(maxsize=1)
+def _malloc_trim() -> Any:
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        return ctypes.CDLL("libc.so.6").malloc_trim  # glibc; musl has no malloc_trim
+    except (OSError, AttributeError):
+        return None
 
 
 def _gib(n: float) -> str:

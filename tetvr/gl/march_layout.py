@@ -1,6 +1,7 @@
 """How the tet-marching ray caster's records sit on the GL: the image units the passes read
-them from, the textures' layout (items a row, powers of two), and the GL buffers of one
-view's rim faces (:func:`tetvr.mesh.records.rim_faces`). Used by :mod:`tetvr.gl.raymarch`."""
+them from, the textures' layout (items a row, powers of two), the textures themselves
+(:func:`records_textures`), and the GL buffers of one view's rim faces
+(:func:`tetvr.mesh.records.rim_faces`). Used by :mod:`tetvr.gl.raymarch`."""
 
 from __future__ import annotations
 
@@ -10,11 +11,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tetvr.mesh.records import RECORD_TEXELS
+from tetvr.mesh import adjacency
+from tetvr.mesh.records import RECORD_TEXELS, MarchRecords, cell_records
+from tetvr.mesh.tetmesh import TetMesh
 
 __all__ = ["PLANES_IMAGE", "IDS_IMAGE", "LINKS_IMAGE", "POINTS_IMAGE", "COUNT_IMAGE", "LIST_IMAGE", "COPIES_IMAGE", "NEIGHBORS_IMAGE",
            "OVERFLOW_BUFFER", "MORE_BUFFER", "SUSPECT_BUFFER", "SUSPECT_LENGTH", "LIST_LENGTH", "LIST_MAX_BYTES", "NEAREST", "Layout", "Rim",
-           "raymarch_capacity", "rect_triangles"]
+           "raymarch_capacity", "rect_triangles", "records_textures", "texture"]
 
 #: GL_NEAREST: records and targets are read with texelFetch, never filtered (the value of
 #: moderngl.NEAREST, written here so that importing this module imports no moderngl).
@@ -110,3 +113,65 @@ class Rim:
     def release(self) -> None:
         for b in (self.rects, self.corners, self.slots, self.drawn):
             b.release()
+
+
+def records_textures(ctx: Any, layout: Layout, mesh: TetMesh, rec: MarchRecords,
+                     copies: NDArray[np.int32] | None) -> tuple[dict[int, Any], bool]:
+    """The records of ``mesh`` on the GL, by image unit (not the points: written per view),
+    and whether the field jumps at any face (march.frag, JUMPS). The per-tet planes and
+    links are built a block of tets at a time (:func:`~tetvr.mesh.records.cell_records`)
+    and each block goes to its textures as it is built, so that the host never holds them
+    whole (on a GL that keeps textures in host memory, as llvmpipe does, they would be
+    there twice); ``copies``: each tet's number of copies, where cells repeat."""
+    if adjacency.BLOCK_TETS % max(layout.planes, layout.links):
+        raise ValueError(f"blocks of {adjacency.BLOCK_TETS} tets do not fill whole rows of {layout}")
+    assert rec.ids is not None
+    textures: dict[int, Any] = {}
+    try:  # a GL out of memory half-way: what was made is released
+        planes = textures[PLANES_IMAGE] = _empty(ctx, mesh.n_tets, layout.planes, RECORD_TEXELS, "f4")
+        links = textures[LINKS_IMAGE] = _empty(ctx, mesh.n_tets, layout.links, 4, "i4")
+        jumps = False
+        for rows in adjacency.blocks(mesh.n_tets):
+            block_planes, block_links = cell_records(mesh, rec, rows)
+            _write(planes, rows.start, block_planes, layout.planes, RECORD_TEXELS, 0.0)
+            _write(links, rows.start, block_links, layout.links, 4, -1)
+            jumps |= bool(np.any(block_links[..., 3]))
+        textures[IDS_IMAGE] = texture(ctx, rec.ids, layout.items, 1, 0)
+        textures[NEIGHBORS_IMAGE] = texture(ctx, rec.boundary_neighbors, layout.items, 1, -1)
+        if copies is not None:
+            per_tet = np.zeros((mesh.n_tets, 4), dtype=np.int32)
+            per_tet[:, 0] = copies
+            textures[COPIES_IMAGE] = texture(ctx, per_tet, layout.items, 1, 0)
+    except BaseException:
+        for tex in textures.values():
+            tex.release()
+        raise
+    return textures, jumps
+
+
+def texture(ctx: Any, items: NDArray[Any], per_row: int, texels: int, fill: float) -> Any:
+    """A texture of ``items``, each ``texels`` texels of four components, ``per_row`` items
+    a row (the last row padded with ``fill``)."""
+    tex = _empty(ctx, items.shape[0], per_row, texels, items.dtype.str[1:])
+    _write(tex, 0, items, per_row, texels, fill)
+    return tex
+
+
+def _empty(ctx: Any, n: int, per_row: int, texels: int, dtype: str) -> Any:
+    """A texture for ``n`` items, each ``texels`` texels of four components, ``per_row`` a row."""
+    tex = ctx.texture((per_row * texels, -(-n // per_row)), 4, dtype=dtype)
+    tex.filter = (NEAREST, NEAREST)
+    return tex
+
+
+def _write(tex: Any, start: int, items: NDArray[Any], per_row: int, texels: int, fill: float) -> None:
+    """``items`` into ``tex`` from item ``start`` (the first of a row) on, as :func:`texture`
+    lays them out: whole rows straight from the array, the last one padded with ``fill``."""
+    whole = items.shape[0] // per_row * per_row
+    row = start // per_row
+    if whole:
+        tex.write(np.ascontiguousarray(items[:whole]), viewport=(0, row, per_row * texels, whole // per_row))
+    if whole < items.shape[0]:
+        last = np.full((per_row, *items.shape[1:]), fill, dtype=items.dtype)
+        last[:items.shape[0] - whole] = items[whole:]
+        tex.write(last, viewport=(0, row + whole // per_row, per_row * texels, 1))

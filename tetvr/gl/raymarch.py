@@ -41,10 +41,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tetvr.core.camera import Camera
-from tetvr.gl.march_layout import (NEIGHBORS_IMAGE, COPIES_IMAGE, COUNT_IMAGE, IDS_IMAGE, LINKS_IMAGE, LIST_IMAGE, LIST_LENGTH,
-                                   LIST_MAX_BYTES, MORE_BUFFER, SUSPECT_BUFFER, SUSPECT_LENGTH, NEAREST, OVERFLOW_BUFFER, PLANES_IMAGE, POINTS_IMAGE, Layout, Rim,
-                                   raymarch_capacity, rect_triangles)
-from tetvr.mesh.records import RECORD_TEXELS, MarchRecords, march_records, near_plane_cells, rim_faces
+from tetvr.core.image import release_free_memory
+from tetvr.gl.march_layout import (COPIES_IMAGE, COUNT_IMAGE, LIST_IMAGE, LIST_LENGTH, LIST_MAX_BYTES, MORE_BUFFER, NEAREST,
+                                   SUSPECT_BUFFER, SUSPECT_LENGTH, OVERFLOW_BUFFER, POINTS_IMAGE, Layout, Rim,
+                                   raymarch_capacity, records_textures, rect_triangles, texture)
+from tetvr.mesh.records import MarchRecords, march_records, near_plane_cells, rim_faces
 from tetvr.mesh.copies import DistinctCells, distinct_cells
 from tetvr.mesh.locality import spatially_ordered
 from tetvr.order.walkable import walk_check
@@ -106,7 +107,7 @@ def _records(mesh: TetMesh) -> tuple[DistinctCells, MarchRecords]:
     (:func:`~tetvr.order.walkable.walk_check`), all cached with the mesh."""
     walk_check(mesh)
     distinct = distinct_cells(spatially_ordered(mesh))
-    return distinct, march_records(distinct.mesh)
+    return distinct, march_records(distinct.mesh, cells=False)  # the per-tet records go to the GL in blocks
 
 
 @dataclasses.dataclass(frozen=True)
@@ -211,6 +212,7 @@ class Marcher:
         drop_targets(self.ctx, self._targets)  # ran every later frame ~10x slower (bricks drawn in turn)
         pending, self._prefetch = self._prefetch, None
         distinct, rec = pending[1].result() if pending is not None and pending[0] is mesh else _records(mesh)
+        release_free_memory()  # the walk check's temporaries, before the textures take their place
         given, mesh = mesh, distinct.mesh
         max_tex = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
         if max(mesh.n_tets, mesh.n_points) > raymarch_capacity(max_tex):
@@ -219,35 +221,19 @@ class Marcher:
                               f"{mesh.n_points} points: use "
                               f"method=\"projected\" or split it into bricks (tetvr.order.cull.submesh)")
         layout = Layout.of(max_tex)
-
-        def texture(items: NDArray[Any], per_row: int, texels: int, fill: float) -> Any:
-            rows = -(-items.shape[0] // per_row)
-            data = np.full((rows * per_row, *items.shape[1:]), fill, dtype=items.dtype)
-            data[:items.shape[0]] = items
-            tex = self.ctx.texture((per_row * texels, rows), 4, data.tobytes(), dtype=items.dtype.str[1:])
-            tex.filter = (NEAREST, NEAREST)
-            return tex
-
-        planes = np.concatenate([rec.planes, rec.scalar[:, None]], axis=1)  # RECORD_TEXELS texels a tet
         # The points' positions are written per view (_write_points): padded to whole rows here.
         self._points = np.zeros((-(-mesh.n_points // layout.items) * layout.items, 4), dtype=np.float32)
         self._points[:mesh.n_points, 3] = mesh.scalars
         self._points_eye = None
-        self._textures = {PLANES_IMAGE: texture(planes, layout.planes, RECORD_TEXELS, 0.0),
-                          IDS_IMAGE: texture(rec.ids, layout.items, 1, 0),
-                          LINKS_IMAGE: texture(rec.links, layout.links, 4, -1),
-                          POINTS_IMAGE: texture(self._points, layout.items, 1, 0.0)}
-        self._textures[NEIGHBORS_IMAGE] = texture(rec.boundary_neighbors, layout.items, 1, -1)
-        if distinct.copies is not None:
-            copies = np.zeros((mesh.n_tets, 4), dtype=np.int32)
-            copies[:, 0] = distinct.copies
-            self._textures[COPIES_IMAGE] = texture(copies, layout.items, 1, 0)
+        self._textures, self._jumps = records_textures(self.ctx, layout, mesh, rec, distinct.copies)
+        self._textures[POINTS_IMAGE] = texture(self.ctx, self._points, layout.items, 1, 0.0)
         pos = self.ctx.buffer(np.ascontiguousarray(rec.boundary_triangles, dtype=np.float32).tobytes())
         slots = self.ctx.buffer(np.repeat(rec.boundary_slots.astype(np.int32), 3).tobytes())
         self._faces = [pos, slots]
         self._shifts = layout.defines
+        # Kept for the views: the boundary faces; each tet's point ids are on the GL alone.
+        rec = dataclasses.replace(rec, ids=None)
         self._mesh, self._walked, self._records = given, mesh, rec
-        self._jumps = bool(np.any(rec.links[..., 3]))  # the field jumps at some faces (march.frag, JUMPS)
         return mesh, rec
 
     def _write_points(self, mesh: TetMesh, rec: MarchRecords, inv_view: NDArray[np.float64]) -> None:

@@ -368,8 +368,8 @@ class Renderer(GLOwner):
             return self._raymarch_exact(mesh, camera, tf, size, order, window)
         if (shader == "tet" and order is None and self.settings.method != "projected"
                 and not (self.settings.method == "auto" and not march_fits(mesh.n_tets))):
-            # A new mesh's records, while the table is built (not for a mesh "auto" sends to
-            # projected tetrahedra for its size: 10M tets' records would pass 4.5 GB).
+            # A new mesh's walk check and records, while the table is built (not for a mesh
+            # "auto" sends to projected tetrahedra for its size: memory it cannot spare).
             self._march.prefetch(mesh)
         table = self.table(mesh, tf)
         self._use_table(table)

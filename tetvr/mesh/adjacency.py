@@ -27,6 +27,12 @@ error of a plane test has a bound that does not depend on where the mesh sits in
 The two sides of an interior face carry exactly negated planes, so the test ``n . e - d``
 of an eye point ``e`` gives exactly opposite signs for the two cells: the two cells can
 never both claim to be in front.
+
+The planes of all ``4m`` faces take 96 bytes a tet in float64, more than the rest of the
+adjacency together, and tet marching reads each only once, into its float32 records: they
+are computed from the mesh's points when asked for, either for a set of faces
+(:meth:`FaceAdjacency.planes`, in blocks) or all at once (``normals`` and ``offsets``, kept
+once computed, as the visibility sort of projected tetrahedra reads them every view).
 """
 
 from __future__ import annotations
@@ -34,16 +40,33 @@ from __future__ import annotations
 import dataclasses
 import threading
 import weakref
+from functools import cached_property
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tetvr.mesh.tetmesh import TetMesh
 
-__all__ = ["FaceAdjacency", "face_adjacency", "FACE_VERTICES"]
+__all__ = ["FaceAdjacency", "face_adjacency", "FACE_VERTICES", "BLOCK_TETS", "blocks"]
 
 #: Local vertex ids of the face opposite local vertex k (slot k of a tet).
 FACE_VERTICES = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]], dtype=np.intp)
+
+#: Tets a block of per-tet work is done in (face planes, cell sizes, the walk's records):
+#: its float64 temporaries then take a few MB, whatever the mesh's size. A multiple of
+#: every records texture's row (:class:`tetvr.gl.march_layout.Layout`: at most 8192 items).
+BLOCK_TETS = 1 << 16
+
+
+def blocks(n: int, size: int | None = None) -> list[slice]:
+    """``range(n)`` as consecutive slices of ``size`` (:data:`BLOCK_TETS` unless given; the last shorter).
+
+    >>> blocks(5, 2)
+    [slice(0, 2, None), slice(2, 4, None), slice(4, 5, None)]
+    """
+    size = size or BLOCK_TETS
+    return [slice(start, min(start + size, n)) for start in range(0, n, size)]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -54,11 +77,15 @@ class FaceAdjacency:
 
     Attributes
     ----------
-    neighbors : (m, 4) int32, the tet across each face, -1 on the boundary.
+    neighbors : (m, 4) int32, the tet across each face, -1 on the boundary (computed from
+        ``mates`` when first read).
     mates : (m, 4) int32, the same face as a slot of that neighbour, as the flat index
         ``4 * neighbor + k`` (so ``mates // 4`` is ``neighbors``), -1 on the boundary.
-    normals : (m, 4, 3) float64, outward unit normal of each face.
-    offsets : (m, 4) float64, ``normals . (x - origin)`` for any point ``x`` of the face.
+    mirrored : (m, 4) bool, the second copy of each interior face: its plane is the exact
+        negation of its mate's.
+    normals : (m, 4, 3) float64, outward unit normal of each face (computed when first read).
+    offsets : (m, 4) float64, ``normals . (x - origin)`` for any point ``x`` of the face
+        (computed with ``normals``).
     origin : (3,) float64, centre of the mesh's bounding box.
     radius : largest distance of a mesh point from ``origin``.
     n_interior_faces : faces shared by two tets.
@@ -75,6 +102,8 @@ class FaceAdjacency:
     canonical : (n_points,) int64, each point's welded id (the lowest id of the points at
         exactly its coordinates), or None where no two points coincide.
     n_welded_points : points that coincide with a lower-numbered one (duplicated nodes).
+    rel_points : (3, n_points) float64, the points relative to ``origin``, one row an axis,
+        and ``tets``, the mesh's tets (the array itself): what the planes are computed from.
 
     Examples
     --------
@@ -86,10 +115,8 @@ class FaceAdjacency:
     (6, 1, 6)
     """
 
-    neighbors: NDArray[np.int32]
     mates: NDArray[np.int32]
-    normals: NDArray[np.float64]
-    offsets: NDArray[np.float64]
+    mirrored: NDArray[np.bool_]
     origin: NDArray[np.float64]
     radius: float
     n_interior_faces: int
@@ -101,11 +128,62 @@ class FaceAdjacency:
     convex: bool = False
     canonical: NDArray[np.int64] | None = None
     n_welded_points: int = 0
+    rel_points: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros((3, 0)), repr=False)
+    tets: NDArray[np.int32] = dataclasses.field(default_factory=lambda: np.zeros((0, 4), np.int32), repr=False)
+
+    def planes(self, slots: NDArray[np.integer[Any]]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Outward unit normals (k, 3) and offsets (k,) of the faces at flat ``slots``
+        (``4 * t + k``): the rows of ``normals`` and ``offsets`` there, bit for bit.
+
+        Examples
+        --------
+        >>> from tetvr.mesh import synthetic
+        >>> adj = face_adjacency(synthetic.cube(2))
+        >>> n, d = adj.planes(np.arange(8))
+        >>> bool(np.array_equal(n, adj.normals.reshape(-1, 3)[:8]) and np.array_equal(d, adj.offsets.reshape(-1)[:8]))
+        True
+        """
+        slots = np.asarray(slots, dtype=np.int64).reshape(-1)
+        mirrored = self.mirrored.reshape(-1)[slots]
+        # The second copy of an interior face takes its mate's plane, negated.
+        normals, offsets = _face_planes(self.rel_points, self.tets,
+                                        np.where(mirrored, self.mates.reshape(-1)[slots], slots))
+        np.negative(normals, out=normals, where=mirrored[:, None])
+        np.negative(offsets, out=offsets, where=mirrored)
+        return normals, offsets
+
+    @cached_property
+    def neighbors(self) -> NDArray[np.int32]:
+        """(m, 4) int32, the tet across each face, -1 on the boundary."""
+        out = np.where(self.mates >= 0, self.mates // 4, -1).astype(np.int32)
+        out.setflags(write=False)
+        return out
+
+    @cached_property
+    def normals(self) -> NDArray[np.float64]:
+        """(m, 4, 3) float64, outward unit normal of each face (computed once, in blocks)."""
+        m = self.mates.shape[0]
+        normals = np.empty((m, 4, 3))
+        offsets = np.empty((m, 4))
+        for rows in blocks(m):
+            n, d = self.planes(np.arange(4 * rows.start, 4 * rows.stop))
+            normals[rows], offsets[rows] = n.reshape(-1, 4, 3), d.reshape(-1, 4)
+        for arr in (normals, offsets):
+            arr.setflags(write=False)
+        self.__dict__["offsets"] = offsets  # a cached_property: seeded in the instance
+        return normals
+
+    @cached_property
+    def offsets(self) -> NDArray[np.float64]:
+        """(m, 4) float64, ``normals . (x - origin)`` for any point ``x`` of each face."""
+        _ = self.normals  # computes both
+        return self.__dict__["offsets"]
 
 
 # Keyed on the identity of the (points, tets) arrays rather than on the mesh, so that
 # meshes that share geometry (``TetMesh.with_scalars``) share one adjacency. An entry is
-# dropped when either array is freed, before its id can be reused.
+# dropped when either array is freed, before its id can be reused: the points, since the
+# adjacency holds the tets (the planes are computed from them).
 _CACHE: dict[tuple[int, int, bytes], FaceAdjacency] = {}
 _LOCK = threading.Lock()
 
@@ -115,7 +193,7 @@ def face_adjacency(mesh: TetMesh) -> FaceAdjacency:
 
     The cache follows the mesh's ``points`` and ``tets`` arrays (immutable in a
     :class:`~tetvr.mesh.tetmesh.TetMesh`), so a mesh with only new scalars reuses it, and it
-    does not keep the arrays alive.
+    does not keep the points alive (the adjacency holds the tets: its entry goes with the points).
 
     Examples
     --------
@@ -139,7 +217,7 @@ def face_adjacency(mesh: TetMesh) -> FaceAdjacency:
 
 
 def _build(mesh: TetMesh) -> FaceAdjacency:
-    tets = np.asarray(mesh.tets, dtype=np.int64)
+    tets = mesh.tets
     pts = np.asarray(mesh.points, dtype=np.float64)
     m = tets.shape[0]
     n_pts = pts.shape[0]
@@ -152,32 +230,27 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
     mates = np.full(4 * m, -1, dtype=np.int32)
     mates[p] = q
     mates[q] = p
-    nbr = np.where(mates >= 0, mates // 4, -1).astype(np.int32)
+    mirrored = np.zeros(4 * m, dtype=bool)
+    mirrored[q] = True
 
     origin = np.array(mesh.float32_origin)  # the bounding box's centre unless a whole mesh's was given
     rel = pts - origin
     radius = float(np.sqrt(np.max(np.einsum("ij,ij->i", rel, rel))))
-    # Corner coordinates as (m, 4) arrays per axis: component-wise arithmetic on these
-    # avoids the (4m, 3) temporaries of np.cross, which cost more than the sort.
-    cx, cy, cz = (np.ascontiguousarray(rel[:, i])[tets] for i in range(3))
-    normals, offsets = _face_planes(cx, cy, cz, p, q)
-    cell_size = _cell_size(cx, cy, cz)
+    rel_points = np.ascontiguousarray(rel.T)
+    cell_size = _cell_size(rel_points, tets)
 
-    neighbors = nbr.reshape(m, 4)
     mates = mates.reshape(m, 4)
-    for arr in (neighbors, mates, normals, offsets, origin):
+    mirrored = mirrored.reshape(m, 4)
+    for arr in (mates, mirrored, origin):
         arr.setflags(write=False)
     n_interior = int(p.size)
     boundary_slots = np.flatnonzero(mates.reshape(-1) < 0)
-    boundary_faces = welded[boundary_slots[:, None] >> 2, FACE_VERTICES[boundary_slots & 3]]
+    boundary_faces = welded[boundary_slots[:, None] >> 2, FACE_VERTICES[boundary_slots & 3]].astype(np.int64)
     for out in (boundary_slots, boundary_faces) + (() if canonical is None else (canonical,)):
         out.setflags(write=False)
-    convex = n_nonmanifold == 0 and _convex_boundary(boundary_slots, boundary_faces, rel, normals, offsets, cell_size)
-    return FaceAdjacency(
-        neighbors=neighbors,
+    adj = FaceAdjacency(
         mates=mates,
-        normals=normals,
-        offsets=offsets,
+        mirrored=mirrored,
         origin=origin,
         radius=radius,
         n_interior_faces=n_interior,
@@ -186,10 +259,14 @@ def _build(mesh: TetMesh) -> FaceAdjacency:
         cell_size=cell_size,
         boundary_slots=boundary_slots,
         boundary_faces=boundary_faces,
-        convex=convex,
         canonical=canonical,
         n_welded_points=0 if canonical is None else int(np.count_nonzero(canonical != np.arange(n_pts))),
+        rel_points=rel_points,
+        tets=mesh.tets,
     )
+    convex = n_nonmanifold == 0 and _convex_boundary(boundary_slots, boundary_faces, rel,
+                                                     *adj.planes(boundary_slots), cell_size)
+    return dataclasses.replace(adj, convex=convex)
 
 
 def coincident_points(points: NDArray[np.float64]) -> NDArray[np.int64] | None:
@@ -221,7 +298,7 @@ def coincident_points(points: NDArray[np.float64]) -> NDArray[np.int64] | None:
 
 
 
-def _pair_faces(tets: NDArray[np.int64], n_pts: int) -> tuple[NDArray[np.intp], NDArray[np.intp], int]:
+def _pair_faces(tets: NDArray[np.integer[Any]], n_pts: int) -> tuple[NDArray[np.intp], NDArray[np.intp], int]:
     """The two flat slots of every interior face (``p[i]`` and ``q[i]`` hold the same
     face) and the number of non-manifold faces (held by more than two cells: unpaired)."""
     m = tets.shape[0]
@@ -233,9 +310,9 @@ def _pair_faces(tets: NDArray[np.int64], n_pts: int) -> tuple[NDArray[np.intp], 
     sorted_faces = []
     for k, (i, j, h) in enumerate(FACE_VERTICES):
         x, y, z = cols[i], cols[j], cols[h]
-        lo = np.minimum(np.minimum(x, y), z)
-        hi = np.maximum(np.maximum(x, y), z)
-        mid = x + y + z - lo - hi
+        lo = np.minimum(np.minimum(x, y), z).astype(np.int64)
+        hi = np.maximum(np.maximum(x, y), z).astype(np.int64)
+        mid = np.maximum(np.minimum(x, y), np.minimum(np.maximum(x, y), z)).astype(np.int64)
         if wide:
             key[:, k] = (lo * n_pts + mid) * n_pts + hi
         else:  # pragma: no cover - meshes with more than two million points
@@ -244,13 +321,14 @@ def _pair_faces(tets: NDArray[np.int64], n_pts: int) -> tuple[NDArray[np.intp], 
         flat_key = key.reshape(-1)
         order = np.argsort(flat_key)
         ks = flat_key[order]
+        del key, flat_key
         same = ks[1:] == ks[:-1]
+        del ks
     else:  # pragma: no cover
         lo, mid, hi = (np.stack([f[c] for f in sorted_faces], axis=1).reshape(-1) for c in range(3))
         order = np.lexsort((hi, mid, lo))
         lo, mid, hi = lo[order], mid[order], hi[order]
         same = (lo[1:] == lo[:-1]) & (mid[1:] == mid[:-1]) & (hi[1:] == hi[:-1])
-    del key
 
     # A pair of equal neighbours is an interior face, unless the run of equal keys is
     # longer than two (a non-manifold face), which is left as boundary on every side.
@@ -262,46 +340,43 @@ def _pair_faces(tets: NDArray[np.int64], n_pts: int) -> tuple[NDArray[np.intp], 
     return order[first], order[first + 1], n_nonmanifold
 
 
-def _face_planes(cx: NDArray[np.float64], cy: NDArray[np.float64], cz: NDArray[np.float64], p: NDArray[np.intp],
-                 q: NDArray[np.intp]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Outward unit normals (m, 4, 3) and offsets (m, 4) of every face, from the corner
-    coordinates (m, 4) per axis; the slots ``q`` get the exact negation of their mates ``p``."""
-    m = cx.shape[0]
-    normals = np.empty((m, 4, 3))
-    offsets = np.empty((m, 4))
-    for k, (i, j, h) in enumerate(FACE_VERTICES):
-        ux, uy, uz = cx[:, j] - cx[:, i], cy[:, j] - cy[:, i], cz[:, j] - cz[:, i]
-        vx, vy, vz = cx[:, h] - cx[:, i], cy[:, h] - cy[:, i], cz[:, h] - cz[:, i]
-        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-        # Outward: the opposite vertex lies on the negative side of the plane.
-        side = nx * (cx[:, k] - cx[:, i]) + ny * (cy[:, k] - cy[:, i]) + nz * (cz[:, k] - cz[:, i])
-        scale = np.where(side > 0, -1.0, 1.0) / np.sqrt(nx * nx + ny * ny + nz * nz)
-        nx *= scale
-        ny *= scale
-        nz *= scale
-        normals[:, k, 0], normals[:, k, 1], normals[:, k, 2] = nx, ny, nz
-        offsets[:, k] = nx * cx[:, i] + ny * cy[:, i] + nz * cz[:, i]
-    # The second copy of each interior face gets the exact negation of the first, so the
-    # plane tests of the two cells can never disagree (not even by rounding).
-    flat_n = normals.reshape(-1, 3)
-    flat_d = offsets.reshape(-1)
-    flat_n[q] = -flat_n[p]
-    flat_d[q] = -flat_d[p]
-    return normals, offsets
+def _face_planes(rel_points: NDArray[np.float64], tets: NDArray[np.integer[Any]],
+                 slots: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Outward unit normals (k, 3) and offsets (k,) of the faces at flat ``slots``, each
+    from its own tet's corners (``rel_points``: (3, n), the points relative to the
+    origin, one row an axis), component by component."""
+    flat = tets.reshape(-1)
+    base, k = slots & ~3, slots & 3
+    corner = [flat[base + FACE_VERTICES[k, c]] for c in range(3)] + [flat[slots]]
+    # (x, y, z) of the face's three corners a, b, c and of the opposite vertex o.
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz), (ox, oy, oz) = ([axis[v] for axis in rel_points] for v in corner)
+    ux, uy, uz = bx - ax, by - ay, bz - az
+    vx, vy, vz = cx - ax, cy - ay, cz - az
+    nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    # Outward: the opposite vertex lies on the negative side of the plane.
+    side = nx * (ox - ax) + ny * (oy - ay) + nz * (oz - az)
+    scale = np.where(side > 0, -1.0, 1.0) / np.sqrt(nx * nx + ny * ny + nz * nz)
+    nx *= scale
+    ny *= scale
+    nz *= scale
+    return np.stack([nx, ny, nz], axis=1), nx * ax + ny * ay + nz * az
 
 
-def _cell_size(cx: NDArray[np.float64], cy: NDArray[np.float64], cz: NDArray[np.float64]) -> float:
-    """The median over the cells of the longest edge, from the corner coordinates (m, 4) per axis."""
-    longest = np.zeros(cx.shape[0])
-    for i, j in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)):
-        ex, ey, ez = cx[:, i] - cx[:, j], cy[:, i] - cy[:, j], cz[:, i] - cz[:, j]
-        np.maximum(longest, ex * ex + ey * ey + ez * ez, out=longest)
+def _cell_size(rel_points: NDArray[np.float64], tets: NDArray[np.integer[Any]]) -> float:
+    """The median over the cells of the longest edge (``rel_points``: (3, n), the points), in blocks of cells."""
+    longest = np.zeros(tets.shape[0])
+    for rows in blocks(tets.shape[0]):
+        cx, cy, cz = (axis[tets[rows]] for axis in rel_points)
+        for i, j in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)):
+            ex, ey, ez = cx[:, i] - cx[:, j], cy[:, i] - cy[:, j], cz[:, i] - cz[:, j]
+            np.maximum(longest[rows], ex * ex + ey * ey + ez * ez, out=longest[rows])
     return float(np.sqrt(np.median(longest)))
 
 
 def _convex_boundary(slots: NDArray[np.int64], verts: NDArray[np.int64], rel: NDArray[np.float64],
-                     normals: NDArray[np.float64], offsets: NDArray[np.float64], cell_size: float) -> bool:
-    """Whether the boundary faces form one closed connected surface, convex at every edge.
+                     n: NDArray[np.float64], d: NDArray[np.float64], cell_size: float) -> bool:
+    """Whether the boundary faces form one closed connected surface, convex at every edge
+    (``n``, ``d``: the planes of the faces at ``slots``).
 
     Each boundary edge must be held by exactly two boundary faces, and the far vertex of
     each must lie on or behind the other's plane (within a rounding tolerance relative to
@@ -325,8 +400,6 @@ def _convex_boundary(slots: NDArray[np.int64], verts: NDArray[np.int64], rel: ND
         return False
     f, g = face[0::2], face[1::2]
     far_f, far_g = far[0::2], far[1::2]
-    n = normals.reshape(-1, 3)[slots]
-    d = offsets.reshape(-1)[slots]
     tol = 1e-9 * max(cell_size, 1e-300)
     if np.any(np.einsum("ij,ij->i", n[f], rel[far_g]) - d[f] > tol):
         return False

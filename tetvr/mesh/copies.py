@@ -81,16 +81,16 @@ def distinct_cells(mesh: TetMesh) -> DistinctCells:
 
 
 def _find(mesh: TetMesh) -> DistinctCells:
-    tets = np.asarray(mesh.tets, dtype=np.int64)
+    tets = mesh.tets  # int32, as are the welded ids below: half the bytes of int64 temporaries
     canonical = coincident_points(mesh.points)
-    welded = tets if canonical is None else canonical[tets]
-    order_in = np.argsort(welded, axis=1, kind="stable")
-    rows = np.take_along_axis(welded, order_in, axis=1)
+    welded = tets if canonical is None else canonical.astype(tets.dtype)[tets]
+    rows = np.sort(welded, axis=1)
     order = np.lexsort(rows.T[::-1])
     s = rows[order]
     same = np.all(s[1:] == s[:-1], axis=1)
     if not same.any():
         return DistinctCells(mesh, None, 0, 0)
+    order_in = np.argsort(welded, axis=1, kind="stable")
     # The field each cell holds at its points, in the same (welded) order: copies must agree.
     if mesh.cell_scalars is not None:
         values = np.asarray(mesh.cell_scalars)[:, None]

@@ -34,6 +34,11 @@ Built here once per mesh:
   and in the next ones until the face it leaves by holds the ray as seen across it (an
   entry beside faces seen edge-on may be a cell a grazing ray misses by a rounding).
 
+The per-tet records (the planes and links, 144 bytes a tet) are built in blocks of
+:data:`~tetvr.mesh.adjacency.BLOCK_TETS` tets (:func:`cell_records`), so that the GL can take
+each block as it is built and the host never holds them whole; :func:`march_records` builds
+them whole, for the CPU.
+
 The points themselves go to the GPU per view, relative to the eye in float64 first, so
 that float32 keeps their precision near the eye wherever the mesh's centre is
 (:mod:`tetvr.gl.raymarch`).
@@ -49,15 +54,17 @@ plane: :func:`near_plane_cells` lists the tets the near plane cuts and where the
 from __future__ import annotations
 
 import dataclasses
+import weakref
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tetvr.mesh.adjacency import FACE_VERTICES, face_adjacency
+from tetvr.mesh.adjacency import FACE_VERTICES, blocks, face_adjacency
 from tetvr.core.camera import Camera, resolve_clipping_range
 from tetvr.mesh.tetmesh import TetMesh
 
-__all__ = ["MarchRecords", "march_records", "near_plane_cells", "rim_faces", "folded_faces", "RECORD_TEXELS"]
+__all__ = ["MarchRecords", "march_records", "cell_records", "near_plane_cells", "rim_faces", "folded_faces",
+           "RECORD_TEXELS"]
 
 #: Texels of one tet's record in the float texture: four face planes, then the scalar.
 RECORD_TEXELS = 5
@@ -74,12 +81,15 @@ class MarchRecords:
 
     Attributes
     ----------
-    planes : (m, 4, 4) float32, face ``k`` of tet ``t``: ``(n, w)`` with ``n . x + w``
-        negative inside (``x`` relative to ``origin``).
-    scalar : (m, 4) float32, ``(g, c)`` with ``s(x) = g . x + c``.
     ids : (m, 4) int32, each tet's point ids in increasing welded id: slot ``k`` of every
         record is this point (face ``k`` is opposite it), so the three points of a face are
         in the same order in both its tets, also where each holds its own copy of them.
+        None in the records the ray caster keeps once they are on the GL (no view reads them).
+    planes : (m, 4, 4) float32, face ``k`` of tet ``t``: ``(n, w)`` with ``n . x + w``
+        negative inside (``x`` relative to ``origin``). None where the per-tet records were
+        left to :func:`cell_records` (``march_records(mesh, cells=False)``), as are
+        ``scalar`` and ``links``.
+    scalar : (m, 4) float32, ``(g, c)`` with ``s(x) = g . x + c``.
     links : (m, 4, 4) int32, across face ``k``: (the mate, the neighbour's point opposite
         that face (on the boundary: the face's row of ``boundary_neighbors``), the neighbour's cell scalar as float32 bits (cell data; else 0), 1 where
         the point field jumps at the face, else 0); the walk reads one link a step
@@ -104,10 +114,7 @@ class MarchRecords:
     convex : the mesh fills a convex region (no ray enters twice).
     """
 
-    planes: NDArray[np.float32]
-    scalar: NDArray[np.float32]
-    ids: NDArray[np.int32]
-    links: NDArray[np.int32]
+    ids: NDArray[np.int32] | None
     boundary_slots: NDArray[np.int64]
     boundary_triangles: NDArray[np.float32]
     boundary_corners: NDArray[np.int64]
@@ -118,11 +125,15 @@ class MarchRecords:
     boundary_spheres: NDArray[np.float64]
     origin: NDArray[np.float64]
     convex: bool
+    planes: NDArray[np.float32] | None = None
+    scalar: NDArray[np.float32] | None = None
+    links: NDArray[np.int32] | None = None
 
     @property
     def mates(self) -> NDArray[np.int32]:
         """(m, 4) int32, ``4 * neighbour + k`` across each face, -1 on the boundary (the
         links' first column)."""
+        assert self.links is not None, "built with cells=False: see cell_records"
         return self.links[..., 0]
 
     @property
@@ -131,9 +142,10 @@ class MarchRecords:
                        if isinstance(f, np.ndarray)))
 
 
-def march_records(mesh: TetMesh) -> MarchRecords:
-    """The per-tet records and boundary faces of ``mesh`` (the face adjacency is cached
-    with the mesh's geometry, :func:`tetvr.mesh.adjacency.face_adjacency`).
+def march_records(mesh: TetMesh, *, cells: bool = True) -> MarchRecords:
+    """The records and boundary faces of ``mesh`` (the face adjacency is cached with the
+    mesh's geometry, :func:`tetvr.mesh.adjacency.face_adjacency`); without the per-tet
+    planes, scalars and links unless ``cells`` (:func:`cell_records` builds them in blocks).
 
     Examples
     --------
@@ -144,78 +156,115 @@ def march_records(mesh: TetMesh) -> MarchRecords:
     """
     adj = face_adjacency(mesh)
     origin = np.asarray(adj.origin, dtype=np.float64)
-    planes = np.empty((mesh.n_tets, 4, 4), dtype=np.float32)
-    planes[..., :3] = adj.normals
-    planes[..., 3] = -adj.offsets
-    rel = mesh.points - origin
-    tets = np.asarray(mesh.tets, dtype=np.intp)
-    p0 = rel[tets[:, 0]]
-    edges = rel[tets[:, 1:]] - p0[:, None, :]  # (m, 3, 3), rows p_k - p_0
-    scalar = np.empty((mesh.n_tets, 4), dtype=np.float32)
-    if mesh.cell_scalars is None:
-        ds = mesh.scalars[tets[:, 1:]] - mesh.scalars[tets[:, :1]]  # (m, 3)
-        # Zero-volume tets are dropped on reading, so every edge matrix is invertible.
-        grad = np.linalg.solve(edges, ds[..., None])[..., 0]
-        scalar[:, :3] = grad
-        scalar[:, 3] = mesh.scalars[tets[:, 0]] - np.einsum("ij,ij->i", grad, p0)
-    else:  # cell data: constant in each tet
-        scalar[:, :3] = 0.0
-        scalar[:, 3] = mesh.cell_scalars
-    slots = np.asarray(adj.boundary_slots, dtype=np.int64)
-    corners = tets[slots // 4][np.arange(slots.shape[0])[:, None], FACE_VERTICES[slots % 4]]
     # The records list each tet's points in increasing welded id (slot k still opposite
     # face k), so the three points of a face come in the same order in both its tets.
-    welded = tets if adj.canonical is None else adj.canonical[tets]
-    order = np.argsort(welded, axis=1, kind="stable")
-    new_slot = np.argsort(order, axis=1).reshape(-1)  # the inverse permutation, by flat slot
-    flat = (np.arange(mesh.n_tets)[:, None] * 4 + order).reshape(-1)  # new flat slot -> old
-    ids = tets.reshape(-1)[flat].reshape(-1, 4)
-    planes = planes.reshape(-1, 4)[flat].reshape(-1, 4, 4)
-    old_mates = np.asarray(adj.mates, dtype=np.int64).reshape(-1)[flat]
-    inner = old_mates >= 0
-    mates = np.where(inner, (old_mates & ~3) + new_slot[np.maximum(old_mates, 0)], -1)
-    links = np.zeros((mesh.n_tets, 4, 4), dtype=np.int32)
-    links[..., 0] = mates.reshape(-1, 4)
-    links[..., 1] = np.where(inner, ids.reshape(-1)[np.maximum(mates, 0)], -1).reshape(-1, 4)
-    nbr = (np.maximum(mates, 0) >> 2).reshape(-1, 4)
-    inner = inner.reshape(-1, 4)
-    if mesh.cell_scalars is not None:
-        cell = np.asarray(mesh.cell_scalars, dtype=np.float32).view(np.int32)
-        links[..., 2] = np.where(inner, cell[nbr], 0)
-    elif adj.canonical is not None:
-        links[..., 3] = _jumps(ids, mates, np.asarray(mesh.scalars, dtype=np.float32))
+    ids = np.empty((mesh.n_tets, 4), dtype=np.int32)
+    for rows in blocks(mesh.n_tets):
+        ids[rows] = np.take_along_axis(mesh.tets[rows], _slot_order(mesh.tets[rows], adj.canonical), axis=1)
+    old_slots = np.asarray(adj.boundary_slots, dtype=np.int64)
+    tets = mesh.tets[old_slots // 4]
+    corners = tets[np.arange(old_slots.shape[0])[:, None], FACE_VERTICES[old_slots % 4]].astype(np.int64)
     # Wound counter-clockwise seen from outside (the GL's front face): entry passes cull the rest.
-    tri = rel[corners]
-    inward = np.einsum("ij,ij->i", np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
-                       adj.normals[slots // 4, slots % 4]) < 0
+    tri = mesh.points[corners] - origin
+    normals, offsets = adj.planes(old_slots)
+    inward = np.einsum("ij,ij->i", np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), normals) < 0
     corners[inward] = corners[inward][:, [0, 2, 1]]
     tri[inward] = tri[inward][:, [0, 2, 1]]
-    slots = 4 * (slots // 4) + new_slot[slots]
+    slots = 4 * (old_slots // 4) + _new_slot(tets, old_slots % 4, adj.canonical)
     a = corners if adj.canonical is None else adj.canonical[corners]
     b = np.roll(a, -1, axis=1)
     edge_keys = np.minimum(a, b).astype(np.int64) * mesh.n_points + np.maximum(a, b)
     pairs = _edge_pairs(edge_keys)
-    # On the boundary the link's second column names the face's row of boundary_neighbors.
-    links.reshape(-1, 4)[slots, 1] = np.arange(slots.size, dtype=np.int32)
-    centres = tri.astype(np.float64).mean(axis=1)
+    planes = np.concatenate([normals, -offsets[:, None]], axis=1).astype(np.float32)  # as the records hold them
+    centres = tri.mean(axis=1)
     radii = np.sqrt(((tri - centres[:, None]) ** 2).sum(axis=-1)).max(axis=1)
     spheres = np.concatenate([centres, radii[:, None] * (1 + 1e-6)], axis=1)
-    return MarchRecords(planes=planes, scalar=scalar, ids=ids.astype(np.int32), links=links, boundary_slots=slots,
-                        boundary_triangles=tri.astype(np.float32), boundary_corners=corners.astype(np.int64),
-                        boundary_edges=edge_keys, boundary_pairs=pairs,
-                        boundary_neighbors=_neighbors(slots, pairs),
-                        boundary_planes=planes[slots // 4, slots % 4].astype(np.float64), boundary_spheres=spheres,
-                        origin=origin,
-                        convex=bool(adj.convex))
+    rec = MarchRecords(ids=ids, boundary_slots=slots, boundary_triangles=tri.astype(np.float32),
+                       boundary_corners=corners, boundary_edges=edge_keys, boundary_pairs=pairs,
+                       boundary_neighbors=_neighbors(slots, pairs), boundary_planes=planes.astype(np.float64),
+                       boundary_spheres=spheres, origin=origin, convex=bool(adj.convex))
+    if not cells:
+        return rec
+    texels = np.empty((mesh.n_tets, RECORD_TEXELS, 4), dtype=np.float32)
+    links = np.empty((mesh.n_tets, 4, 4), dtype=np.int32)
+    for rows in blocks(mesh.n_tets):
+        texels[rows], links[rows] = cell_records(mesh, rec, rows)
+    return dataclasses.replace(rec, planes=texels[:, :4], scalar=texels[:, 4], links=links)
 
 
-def _jumps(ids: NDArray[np.intp], mates: NDArray[np.int64], scalars: NDArray[np.float32]) -> NDArray[np.int32]:
-    """(m, 4) int32: 1 across the faces whose points carry other values in the tet beyond
-    (duplicated nodes of two regions), as the GPU reads them (float32)."""
-    faces = scalars[ids[:, FACE_VERTICES]].reshape(-1, 3)  # (4m, 3), in the records' slot order
-    inner = mates >= 0
-    other = faces[np.maximum(mates, 0)]
-    return (inner & np.any(faces != other, axis=1)).astype(np.int32).reshape(-1, 4)
+def cell_records(mesh: TetMesh, rec: MarchRecords, rows: slice) -> tuple[NDArray[np.float32], NDArray[np.int32]]:
+    """The per-tet records of tets ``rows`` of ``mesh`` (``rec``: its :func:`march_records`):
+    (n, :data:`RECORD_TEXELS`, 4) float32, the four face planes and the scalar (``planes``
+    and ``scalar``), and (n, 4, 4) int32 ``links``, in the slot order of ``rec.ids``."""
+    assert rec.ids is not None, "the records' ids were dropped: build them again with march_records"
+    adj = face_adjacency(mesh)
+    tets = mesh.tets[rows]
+    n = tets.shape[0]
+    # Each record slot's slot in the adjacency (4 * t + k); then, across it, the adjacency's
+    # slot of the face beyond and the record slot of that face in the tet beyond.
+    old = (np.arange(rows.start, rows.stop)[:, None] * 4 + _slot_order(tets, adj.canonical)).reshape(-1)
+    texels = np.empty((n, RECORD_TEXELS, 4), dtype=np.float32)
+    normals, offsets = adj.planes(old)
+    texels[:, :4, :3] = normals.reshape(n, 4, 3)
+    texels[:, :4, 3] = -offsets.reshape(n, 4)
+    texels[:, 4] = _scalar_records(mesh, rec.origin, rows)
+    old_mates = adj.mates.reshape(-1)[old].astype(np.int64)
+    inner = old_mates >= 0
+    beyond = np.maximum(old_mates, 0)
+    nbr = beyond >> 2
+    mates = np.where(inner, 4 * nbr + _new_slot(mesh.tets[nbr], beyond & 3, adj.canonical), -1)
+    links = np.zeros((n * 4, 4), dtype=np.int32)
+    links[:, 0] = mates
+    links[:, 1] = np.where(inner, mesh.tets.reshape(-1)[beyond], -1)  # the neighbour's point off the face
+    # On the boundary the link's second column names the face's row of boundary_neighbors.
+    tet_of = rec.boundary_slots >> 2
+    first, last = np.searchsorted(tet_of, [rows.start, rows.stop])
+    links[rec.boundary_slots[first:last] - 4 * rows.start, 1] = np.arange(first, last, dtype=np.int32)
+    if mesh.cell_scalars is not None:
+        links[:, 2] = np.where(inner, mesh.cell_scalars[nbr].astype(np.float32).view(np.int32), 0)
+    elif adj.canonical is not None:
+        links[:, 3] = _jumps(rec.ids, rows, mates, np.asarray(mesh.scalars, dtype=np.float32))
+    return texels, links.reshape(n, 4, 4)
+
+
+def _slot_order(tets: NDArray[np.int32], canonical: NDArray[np.int64] | None) -> NDArray[np.intp]:
+    """(n, 4): each record slot's column in ``tets``, by increasing welded id."""
+    return np.argsort(tets if canonical is None else canonical[tets], axis=1, kind="stable")
+
+
+def _new_slot(tets: NDArray[np.int32], k: NDArray[np.int64], canonical: NDArray[np.int64] | None) -> NDArray[np.int64]:
+    """The record slot of column ``k`` of each row of ``tets`` (:func:`_slot_order`'s inverse):
+    the points before it by welded id, ties by column (a stable sort's order)."""
+    welded = tets if canonical is None else canonical[tets]
+    own = welded[np.arange(k.size), k][:, None]
+    return np.count_nonzero((welded < own) | ((welded == own) & (np.arange(4) < k[:, None])), axis=1)
+
+
+def _scalar_records(mesh: TetMesh, origin: NDArray[np.float64], rows: slice) -> NDArray[np.float32]:
+    """(n, 4) float32, the field in each of tets ``rows`` as ``(g, c)`` with ``s(x) = g . x + c``."""
+    tets = mesh.tets[rows]
+    scalar = np.empty((tets.shape[0], 4), dtype=np.float32)
+    if mesh.cell_scalars is not None:  # cell data: constant in each tet
+        scalar[:, :3] = 0.0
+        scalar[:, 3] = mesh.cell_scalars[rows]
+        return scalar
+    p0 = mesh.points[tets[:, 0]] - origin
+    edges = (mesh.points[tets[:, 1:]] - origin) - p0[:, None, :]  # (n, 3, 3), rows p_k - p_0
+    ds = mesh.scalars[tets[:, 1:]] - mesh.scalars[tets[:, :1]]  # (n, 3)
+    # Zero-volume tets are dropped on reading, so every edge matrix is invertible.
+    grad = np.linalg.solve(edges, ds[..., None])[..., 0]
+    scalar[:, :3] = grad
+    scalar[:, 3] = mesh.scalars[tets[:, 0]] - np.einsum("ij,ij->i", grad, p0)
+    return scalar
+
+
+def _jumps(ids: NDArray[np.int32], rows: slice, mates: NDArray[np.int64], scalars: NDArray[np.float32]) -> NDArray[np.int32]:
+    """(4n,) int32: 1 across the faces of tets ``rows`` whose points carry other values in
+    the tet beyond (duplicated nodes of two regions), as the GPU reads them (float32)."""
+    faces = scalars[ids[rows][:, FACE_VERTICES]].reshape(-1, 3)  # (4n, 3), in the records' slot order
+    beyond = np.maximum(mates, 0)
+    other = scalars[ids[(beyond >> 2)[:, None], FACE_VERTICES[beyond & 3]]]  # the same faces, seen from beyond
+    return ((mates >= 0) & np.any(faces != other, axis=1)).astype(np.int32)
 
 
 def _neighbors(slots: NDArray[np.int64], pairs: NDArray[np.int64]) -> NDArray[np.int32]:
@@ -272,20 +321,26 @@ def folded_faces(mesh: TetMesh) -> int:
     """
     adj = face_adjacency(mesh)
     cached = _FOLDS.get(id(adj))
-    if cached is not None and cached[0] is adj:
+    if cached is not None and cached[0]() is adj:
         return cached[1]
-    t, k = np.nonzero(adj.mates >= 0)
-    mate = adj.mates[t, k]
-    other = mesh.points[mesh.tets[mate // 4, mate % 4]] - adj.origin  # the mate's vertex off the face
-    side = np.einsum("ij,ij->i", adj.normals[t, k], other) - adj.offsets[t, k]
-    # Outward from t, so the mate's far vertex must be ahead of the plane; allow rounding.
-    n = int(np.count_nonzero(side <= -1e-12 * adj.radius)) // 2
+    mates = adj.mates.reshape(-1)
+    folded = 0
+    for rows in blocks(mesh.n_tets):
+        slots = np.arange(4 * rows.start, 4 * rows.stop)
+        slots = slots[mates[slots] >= 0]
+        mate = mates[slots]
+        other = mesh.points[mesh.tets[mate // 4, mate % 4]] - adj.origin  # the mate's vertex off the face
+        normals, offsets = adj.planes(slots)
+        side = np.einsum("ij,ij->i", normals, other) - offsets
+        # Outward from the slot's tet, so the mate's far vertex must be ahead of the plane; allow rounding.
+        folded += int(np.count_nonzero(side <= -1e-12 * adj.radius))
+    n = folded // 2
     _FOLDS.clear()
-    _FOLDS[id(adj)] = (adj, n)
+    _FOLDS[id(adj)] = (weakref.ref(adj), n)
     return n
 
 
-_FOLDS: dict[int, tuple[object, int]] = {}
+_FOLDS: dict[int, tuple[weakref.ref[object], int]] = {}  # the last adjacency, held weakly, and its count
 
 
 def near_plane_cells(mesh: TetMesh, camera: Camera, aspect: float) -> tuple[NDArray[np.int64], NDArray[np.float64]]:

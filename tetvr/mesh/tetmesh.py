@@ -97,7 +97,7 @@ class TetMesh:
         t = _valid_tets(tets, pts.shape[0])
         s, c = _valid_scalars(pts, t, scalars, cell_scalars)
 
-        t = np.sort(t.astype(np.int64), axis=1)
+        t.sort(axis=1)  # t is _valid_tets's own copy
         if np.any(t[:, :-1] == t[:, 1:]):
             bad = int(np.nonzero(np.any(t[:, :-1] == t[:, 1:], axis=1))[0][0])
             raise ValueError(f"tet {bad} repeats a vertex: {np.asarray(tets)[bad].tolist()}")
@@ -120,15 +120,16 @@ class TetMesh:
         keep = ~flat
         neg = vol6 < 0
         t[neg] = t[neg][:, [0, 1, 3, 2]]
-        t = t[keep]
+        t = t[keep].astype(np.int32)  # as the mesh holds them
         order = np.lexsort(t.T[::-1])
-        t = t[order].astype(np.int32)
+        t = t[order]
         if c is not None:
             c = c[keep][order]
             c.setflags(write=False)
         # Count what was actually inverted in the input, not what sorting the ids flipped.
-        raw = np.asarray(tets).astype(np.int64)[keep]
-        inverted = int(np.sum(_signed_volume6(pts, raw) < 0))
+        raw = np.asarray(tets)
+        inverted = sum(int(np.sum(_signed_volume6(pts, raw[rows][keep[rows]].astype(np.int64)) < 0))
+                       for rows in _blocks(raw.shape[0]))
         report = MeshReport(input_cells=int(np.asarray(tets).shape[0]), dropped_degenerate=dropped,
                             inverted_fixed=inverted)
         for arr in (pts, t, s):
@@ -422,15 +423,32 @@ def _as_float_array(value: ArrayLike, name: str) -> NDArray[np.float64]:
     return np.array(arr, dtype=np.float64, copy=True)
 
 
+#: Tets a block of per-tet geometry is computed in: its (n, 4, 3) corners take 25 MB, not
+#: 96 bytes a tet of the whole mesh at once.
+_BLOCK_TETS = 1 << 18
+
+
+def _blocks(n: int) -> list[slice]:
+    return [slice(start, min(start + _BLOCK_TETS, n)) for start in range(0, n, _BLOCK_TETS)]
+
+
 def _signed_volume6(points: NDArray[np.float64], tets: NDArray[np.integer[Any]]) -> NDArray[np.float64]:
-    p = points[tets]
-    return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0])
+    """(m,) six times each tet's signed volume, computed a block of tets at a time."""
+    out = np.empty(tets.shape[0])
+    for rows in _blocks(tets.shape[0]):
+        p = points[tets[rows]]
+        out[rows] = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0])
+    return out
 
 
 def _max_edge(points: NDArray[np.float64], tets: NDArray[np.integer[Any]]) -> NDArray[np.float64]:
-    p = points[tets]
+    """(m,) each tet's longest edge, computed a block of tets at a time."""
+    out = np.empty(tets.shape[0])
     pairs = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
-    return np.max([np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in pairs], axis=0)
+    for rows in _blocks(tets.shape[0]):
+        p = points[tets[rows]]
+        out[rows] = np.max([np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in pairs], axis=0)
+    return out
 
 
 def _cell_column(blocks: list[NDArray[Any]]) -> NDArray[Any]:

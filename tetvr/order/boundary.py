@@ -135,7 +135,7 @@ def _eye_faces(mesh: TetMesh, camera: Camera, adj: FaceAdjacency) -> tuple[
     view = camera.view_matrix()
     eye_pts = mesh.points @ view[:3, :3].T + view[:3, 3]
     p = eye_pts[verts]  # (F, 3, 3)
-    n = adj.normals.reshape(-1, 3)[slots] @ view[:3, :3].T
+    n = adj.planes(slots)[0] @ view[:3, :3].T  # the boundary's planes only (not all of normals)
     c = np.einsum("ij,ij->i", n, p[:, 0])  # plane: n . x = c
     if camera.parallel_projection:
         facing = n[:, 2]  # > 0: the outward normal points at the eye (toward +z)

@@ -51,9 +51,9 @@ CROSSOVER_SEGMENTS_PER_TET = (
     if MARCH_NS_PER_SEGMENT > AUTO_MARGIN * PROJECTED_NS_PER_FRAGMENT else float("inf"))
 #: Host memory tet marching takes per tet for a mesh's first frame on llvmpipe, which keeps
 #: GL textures in host memory: the records, the face adjacency and its temporaries
-#: (bench/results/frame_memory.json: 1,000 B a tet measured on 105k and 413k tets, beside
-#: the mesh's own 130; projected tetrahedra add 450 and draw in chunks).
-MARCH_BYTES_PER_TET = 1000
+#: (bench/results/frame_memory.json: 330 B a tet measured on 105k and 413k tets, beside the
+#: mesh's own 22, rounded up; projected tetrahedra add 510 and draw in chunks).
+MARCH_BYTES_PER_TET = 400
 #: "auto" takes tet marching for a mesh whose records take at most this share of the memory
 #: the system says is available (:func:`tetvr.core.image.available_memory`), else projected
 #: tetrahedra, which draw in chunks with bounded memory (bench/memory.py: 10M tets in 3.5 GB).
@@ -136,7 +136,7 @@ def march_fits(n_tets: int, available: int | None = -1) -> bool:
 
     Examples
     --------
-    >>> march_fits(3_000_000, available=16 * 2**30), march_fits(3_000_000, available=4 * 2**30)
+    >>> march_fits(3_000_000, available=16 * 2**30), march_fits(3_000_000, available=2 * 2**30)
     (True, False)
     >>> march_fits(3_000_000, available=None)
     False

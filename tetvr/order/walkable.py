@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+import weakref
 
 import numpy as np
 
@@ -136,7 +137,9 @@ class WalkCheck:
         return bool(self.conflicting_cells or self.nonmanifold_faces or self.folded_faces or self.overlap_rays)
 
 
-_CACHE: dict[int, tuple[FaceAdjacency, WalkCheck]] = {}
+# id(adjacency) -> (a weak reference to it, its check): the check lives as long as the
+# adjacency, and the cache keeps neither it nor the mesh's arrays alive.
+_CACHE: dict[int, tuple[weakref.ref[FaceAdjacency], WalkCheck]] = {}
 _LOCK = threading.Lock()
 
 
@@ -159,7 +162,7 @@ def walk_check(mesh: TetMesh) -> WalkCheck:
     mesh = distinct.mesh
     adj = face_adjacency(mesh)
     cached = _CACHE.get(id(adj))
-    if cached is not None and cached[0] is adj:
+    if cached is not None and cached[0]() is adj:
         return cached[1]
     overlap, rays = (0, 0) if distinct.n_conflicting or adj.n_nonmanifold_faces else _overlap_rays(mesh, adj)
     check = WalkCheck(welded_points=adj.n_welded_points, repeated_cells=distinct.n_repeats,
@@ -170,7 +173,7 @@ def walk_check(mesh: TetMesh) -> WalkCheck:
     with _LOCK:
         if len(_CACHE) > 64:
             _CACHE.clear()
-        _CACHE[id(adj)] = (adj, check)
+        _CACHE[id(adj)] = (weakref.ref(adj), check)
     return check
 
 
