@@ -705,6 +705,33 @@ def frame_memory() -> str:
             + "\n".join(tets))
 
 
+def marching_memory() -> str:
+    """docs/limits.md: the peak memory of a process that draws one frame of ~2M tets, tet
+    marching's stage by stage, beside VTK's projected tetrahedra (bench/memory.py)."""
+    r = _load("memory.json")
+    v = r["vs_vtk"]
+    mib = lambda b: f"{b / 2**20:.0f}"  # noqa: E731
+    vtk = v["vtk_pt"]["peak_rss"]
+    rows = ["| process | peak resident MiB (median) | the runs' range MiB | / VTK's |", "|---|---:|---:|---:|"]
+    for key, label in (("raymarch", 'tetvr, tet marching (`method="raymarch"`)'),
+                       ("projected", 'tetvr, projected tetrahedra (`method="projected"`)'),
+                       ("vtk_pt", f"VTK {v['vtk_pt'].get('version', '')}, `vtkProjectedTetrahedraMapper`")):
+        runs = v[key]["peak_rss_runs"]
+        rows.append(f"| {label} | {mib(v[key]['peak_rss'])} | {mib(min(runs))}-{mib(max(runs))} "
+                    f"| {v[key]['peak_rss'] / vtk:.2f} |")
+    stages = ["| tet marching, stage by stage | peak while it ran MiB | resident after MiB | s |", "|---|---:|---:|---:|"]
+    for row in v["stages"]:
+        stages.append(f"| {r['stage_words'][row['stage']]} | {mib(row['peak_rss'])} | {mib(row['rss_after'])} "
+                      f"| {row['seconds']:.1f} |")
+    return (f"Measured by `bench/memory.py` ({r['created']}, `bench/results/memory.json`): the peak resident "
+            f"memory of a process that builds `synthetic.cube({v['n']})` ({v['n_tets']:,} tets), its default "
+            f"transfer function and a renderer, and draws one {v['size'][0]}x{v['size'][1]} frame (the median of "
+            f"{v['runs']} processes); VTK's process receives the mesh's arrays and renders them. Below, the same "
+            f"tet-marching frame one stage after another on one thread, each stage's peak on its own (the "
+            f"interpreter with tetvr imported takes {mib(v['interpreter_rss'])} MiB).\n\n"
+            + "\n".join(rows) + "\n\n" + "\n".join(stages))
+
+
 def grazing() -> str:
     """Cameras beside the boundary of a mesh and its bricks (bench/grazing.py)."""
     r = _load("grazing.json")
@@ -719,7 +746,7 @@ def grazing() -> str:
             f"({r['date'][:10]}, `bench/results/grazing.json`).\n\n" + "\n".join(rows))
 
 
-TABLES: dict[str, Callable[[], str]] = {"imperfect_meshes": imperfect_meshes, "frame_memory": frame_memory, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
+TABLES: dict[str, Callable[[], str]] = {"imperfect_meshes": imperfect_meshes, "frame_memory": frame_memory, "marching_memory": marching_memory, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
                                         "compare_demo": compare_demo,
                                         "viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "raymarch_stages": raymarch_stages,
                                         "volume_accuracy": volume_accuracy,
