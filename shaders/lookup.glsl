@@ -60,6 +60,27 @@ float warp_extinction(vec2 x, vec2 st) {
     return n0.z > 0.5 ? opacity * n0.y : -log(1.0 - opacity) * n0.y;
 }
 #endif
+// Texture coordinate of the fractional thickness slice of a segment of world length d: slice
+// 0 is zero thickness, slice k >= 1 is d_min * base^(k - 1), linear below d_min; z is
+// (slice + 0.5) / (K + 1). Beyond the thickest slice (z > (K + 0.5) / (K + 1)) the texture
+// clamps to that slice.
+float slice_z(float d) {
+    float x = d * u_slices.x;
+    return x < 1.0 ? x * u_slices.y + u_slices.z : log2(x) * u_slices.w + u_slices_log;
+}
+
+#if defined(TABLE_CUBIC) && TABLE_CUBIC
+// Catmull-Rom along the thickness axis: the first of the four slices read (k0 - 1, clamped
+// by the caller) and their weights, for slice coordinate z.
+vec4 catmull_rom(float z, out float k0) {
+    float slice = z * u_table_size.z - 0.5;
+    k0 = floor(slice);
+    float f = slice - k0;
+    return 0.5 * vec4(((-f + 2.0) * f - 1.0) * f, (3.0 * f - 5.0) * f * f + 2.0,
+                      ((-3.0 * f + 4.0) * f + 1.0) * f, (f - 1.0) * f * f);
+}
+#endif
+
 #if defined(TABLE_STEPS) && TABLE_STEPS
 #include "lookup_steps.glsl"
 #endif
@@ -82,17 +103,11 @@ vec4 lookup_table(vec2 st, float d) {
     vec2 cells = st;
     st = warp_st(cells);
 #endif
-    // Slice 0 is zero thickness, slice k >= 1 is d_min * base^(k - 1), linear below d_min;
-    // z is the texture coordinate of the fractional slice, (slice + 0.5) / (K + 1). Beyond
-    // the thickest slice (z > (K + 0.5) / (K + 1)) the texture clamps to that slice.
-    float x = d * u_slices.x;
-    float z = x < 1.0 ? x * u_slices.y + u_slices.z : log2(x) * u_slices.w + u_slices_log;
+    float z = slice_z(d);
 #if defined(TABLE_CUBIC) && TABLE_CUBIC
-    // Catmull-Rom along the thickness axis: four slices, each read at its texel centre.
-    float slice = z * u_table_size.z - 0.5;
-    float k0 = floor(slice), f = slice - k0;
-    vec4 w = 0.5 * vec4(((-f + 2.0) * f - 1.0) * f, (3.0 * f - 5.0) * f * f + 2.0,
-                        ((-3.0 * f + 4.0) * f + 1.0) * f, (f - 1.0) * f * f);
+    // Four slices, each read at its texel centre.
+    float k0;
+    vec4 w = catmull_rom(z, k0);
     vec4 t = vec4(0.0);
     for (int i = 0; i < 4; ++i) {
         float k = clamp(k0 + float(i - 1), 0.0, u_table_size.z - 1.0);

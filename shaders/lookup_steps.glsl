@@ -22,20 +22,12 @@
 
 uniform sampler3D u_steps;
 
-// Texture coordinate of the fractional slice of thickness d (as lookup_table).
-float steps_slice(float d) {
-    float x = d * u_slices.x;
-    return x < 1.0 ? x * u_slices.y + u_slices.z : log2(x) * u_slices.w + u_slices_log;
-}
-
 // The entry at texture coordinates xy of u_table (run) or u_steps, slice coordinate z.
 vec4 steps_fetch(bool run, vec2 xy, float z) {
 #if defined(TABLE_CUBIC) && TABLE_CUBIC
     // Catmull-Rom along the thickness axis, as lookup_table.
-    float slice = z * u_table_size.z - 0.5;
-    float k0 = floor(slice), f = slice - k0;
-    vec4 w = 0.5 * vec4(((-f + 2.0) * f - 1.0) * f, (3.0 * f - 5.0) * f * f + 2.0,
-                        ((-3.0 * f + 4.0) * f + 1.0) * f, (f - 1.0) * f * f);
+    float k0;
+    vec4 w = catmull_rom(z, k0);
     vec4 t = vec4(0.0);
     for (int i = 0; i < 4; ++i) {
         float k = (clamp(k0 + float(i - 1), 0.0, u_table_size.z - 1.0) + 0.5) / u_table_size.z;
@@ -71,7 +63,7 @@ vec4 steps_rgba(vec4 t, float d) {
 vec4 steps_bin(vec2 p, float i, float d) {
     vec2 uv = clamp(p - i, 0.0, 1.0);
     vec2 xy = vec2((2.0 * i + 0.5 + uv.x) / (2.0 * u_table_size.x - 2.0), 0.5 * (0.5 + uv.y));
-    return steps_rgba(steps_fetch(false, xy, steps_slice(d)), d);
+    return steps_rgba(steps_fetch(false, xy, slice_z(d)), d);
 }
 
 vec4 lookup_steps(vec2 st, float d) {
@@ -92,7 +84,7 @@ vec4 lookup_steps(vec2 st, float d) {
     if (within || a != f.x) acc = steps_bin(front, front_bin, within ? d : abs(a - f.x) * per);
     if (!within) {
         float run_d = abs(b - a) * per;
-        acc += (1.0 - acc.a) * steps_rgba(steps_run(ivec2(a, b), steps_slice(run_d)), run_d);
+        acc += (1.0 - acc.a) * steps_rgba(steps_run(ivec2(a, b), slice_z(run_d)), run_d);
         if (b != f.y) acc += (1.0 - acc.a) * steps_bin(vec2(b, f.y), up ? b : b - 1.0, abs(f.y - b) * per);
     }
     return acc;
