@@ -189,6 +189,13 @@ def scene_chart(report: dict[str, Any], name: str, path: Path) -> None:
     fig.suptitle(f"{name} ({n_tets:,} tets): speed against accuracy, tetvr and VTK, same machine and GL "
                  f"({report.get('gl', {}).get('GL_RENDERER', '?')}), frames in turn ({report['created'][:10]})",
                  fontsize=10)
+    _finish(fig, report, st, path)
+
+
+def _finish(fig: Any, report: dict[str, Any], st: Any, path: Path) -> None:
+    """Lay out a speed chart above its legends, save it and close it."""
+    import matplotlib.pyplot as plt
+
     legend_h = 2.6 / fig.get_figheight()
     fig.tight_layout(rect=(0, legend_h, 1, 0.94))
     _legend(fig, report, st, legend_h)
@@ -216,12 +223,7 @@ def summary_chart(report: dict[str, Any], path: Path) -> None:
     fig.suptitle(f"tetvr's methods and settings and VTK's mappers over all scenes: speed against accuracy "
                  f"({report.get('gl', {}).get('GL_RENDERER', '?')}, {report['created'][:10]}; one chart per "
                  f"scene: speed_accuracy_<scene>.png)", fontsize=10)
-    legend_h = 2.6 / fig.get_figheight()
-    fig.tight_layout(rect=(0, legend_h, 1, 0.94))
-    _legend(fig, report, st, legend_h)
-    _line_legend(fig)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    _finish(fig, report, st, path)
 
 
 def stability_chart(report: dict[str, Any], path: Path) -> None:
