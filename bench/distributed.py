@@ -785,6 +785,7 @@ def chart_compositing(result: dict, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
+
 def chart(result: dict, path: Path) -> None:
     import matplotlib
 

@@ -115,14 +115,9 @@ DEFAULT_MESHES = [("bluntfin_tets.vtu", "Density"), ("pipe_flow_init_flow.vtu", 
                   ("beam_tet4_result_100.vtu", "VonMises_stress"), ("post.vtk", "Pressure")]
 
 
-def defaults():
-    """Real FEM/CFD results with tetvr's defaults, beside a constant opacity over the full range."""
-    from tetvr.core.camera import _fit
-    from tetvr.render import default_transfer_function
-    from tetvr.optics.transfer import default_unit_distance
-
-    imgs, titles = [], []
-    size = (320, 240)
+def _shared_meshes():
+    """(file name, field, path, mesh) of each of DEFAULT_MESHES that the shared data holds;
+    the others are named as skipped."""
     for name, field in DEFAULT_MESHES:
         path = SHARED / "tets" / name
         if not path.is_file():
@@ -131,6 +126,18 @@ def defaults():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # zero-volume tets dropped, cell data averaged
             mesh = tetvr.read(path, field)
+        yield name, field, path, mesh
+
+
+def defaults():
+    """Real FEM/CFD results with tetvr's defaults, beside a constant opacity over the full range."""
+    from tetvr.core.camera import _fit
+    from tetvr.render import default_transfer_function
+    from tetvr.optics.transfer import default_unit_distance
+
+    imgs, titles = [], []
+    size = (320, 240)
+    for name, field, path, mesh in _shared_meshes():
         cam = _fit(mesh, aspect=size[0] / size[1])
         flat = TransferFunction.preset("viridis", mesh.scalar_range, opacity=0.5,
                                        unit_distance=default_unit_distance(mesh.bounds))
@@ -164,14 +171,7 @@ def before_after(size=(640, 480)):
 
     from tetvr.optics.transfer import default_unit_distance
 
-    for name, field in DEFAULT_MESHES:
-        path = SHARED / "tets" / name
-        if not path.is_file():
-            print(f"skipped {name}: {path} is absent (the shared data)")
-            continue
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            mesh = tetvr.read(path, field)
+    for name, field, path, mesh in _shared_meshes():
         tf = TransferFunction.preset("viridis", mesh.scalar_range, opacity=0.5,
                                      unit_distance=default_unit_distance(mesh.bounds))
         before = tetvr.render(mesh, camera=_sphere_framed(mesh), tf=tf, size=size)
