@@ -207,9 +207,6 @@ class Marcher:
         for obj in [*self._vaos.values(), *self._textures.values(), *self._faces]:
             obj.release()
         self._vaos.clear()
-        from tetvr.gl.util import drop_targets  # new targets too: kept across a change of mesh, llvmpipe
-
-        drop_targets(self.ctx, self._targets)  # ran every later frame ~10x slower (bricks drawn in turn)
         pending, self._prefetch = self._prefetch, None
         distinct, rec = pending[1].result() if pending is not None and pending[0] is mesh else _records(mesh)
         release_free_memory()  # the walk check's temporaries, before the textures take their place
