@@ -237,7 +237,8 @@ def plot(res: dict[str, Any], path: Path) -> None:
     meshes = sorted(res["meshes"], key=lambda m: m["n_tets"])
     if not meshes:
         return
-    names = [f"{m['name'].split(' ')[0]}\n{m['n_tets'] / 1e3:.0f}k" for m in meshes]
+    # "beam_tet4_result_100 (VonMises_stress)" -> "beam": the file's first word fits under a bar.
+    names = [f"{m['name'].split(' ')[0].split('_')[0]}\n{m['n_tets'] / 1e3:.0f}k" for m in meshes]
     x = np.arange(len(meshes))
     fig, ax = plt.subplots(1, 3, figsize=(17, 5.2))
     w = 0.2
