@@ -75,6 +75,8 @@ def cases(data: Path) -> list[Case]:
          _views((0.3, -0.5, -1.0))),
         ("overlapping parts", "refined block in a coarse cube", imperfect.embedded_block, _views((0.3, -0.5, -1.0))),
         ("overlapping parts", "one cell laid over a cube", imperfect.cell_laid_over, _views((0.3, -0.5, -1.0))),
+        ("gaps between cells", "12 layers, faces not matching between", imperfect.gaps,
+         _views((0.3, 0.2, 1.0), (1.0, 0.4, 0.2))),
         ("extreme extent", "cube(3) x 1.7e17", lambda: imperfect.scaled(synthetic.cube(3, imperfect.field), 1.7e17),
          _views((-1.0, -0.6, -1.2))),
         ("extreme extent", "cube(3) x 2.4e-13", lambda: imperfect.scaled(synthetic.cube(3, imperfect.field), 2.4e-13),

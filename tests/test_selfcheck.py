@@ -80,3 +80,32 @@ def test_reference_pixels_are_the_reference_images_pixels():
     np.testing.assert_array_equal(render_reference_pixels(mesh, camera, tf, SIZE, pixels), full[pixels])
     with pytest.raises(ValueError, match="pixels must lie in the 40x32 image"):
         render_reference_pixels(mesh, camera, tf, SIZE, [SIZE[0] * SIZE[1]])
+
+
+@pytest.mark.parametrize("view", ["inside", "parallel", "outside"])
+def test_reference_pixels_of_a_few_pixels_cull_no_tet_they_need(view):
+    """The pixels' tets are found first by their vertices' boxes (every tet the near plane
+    cuts kept): the values are the full image's, bit for bit."""
+    mesh = synthetic.torus()
+    camera = tetvr.Camera.fit(mesh, direction=(0.3, -0.8, -0.5), parallel=view == "parallel")
+    if view == "inside":  # the eye in the tube: the near plane cuts cells
+        camera = tetvr.Camera(position=(1.0, 0.0, 0.05), focal_point=(1.0, 1.0, 0.0), view_angle=70.0)
+    tf = tetvr.TransferFunction.preset("viridis", mesh.scalar_range, opacity=0.8, mesh=mesh)
+    full = render_reference(mesh, camera, tf, SIZE).reshape(-1, 4)
+    assert np.count_nonzero(full[:, 3] > 0.01) > 100
+    pixels = np.random.default_rng(3).choice(SIZE[0] * SIZE[1], 60, replace=False)
+    np.testing.assert_array_equal(render_reference_pixels(mesh, camera, tf, SIZE, pixels), full[pixels])
+
+
+def test_rays_past_the_last_layer_are_traced_again(monkeypatch):
+    """A ray that would enter the mesh again after the march's last layer is not cut off:
+    its pixel is traced again exactly (here with 1 layer on a torus, entered twice)."""
+    mesh = synthetic.torus()
+    camera, tf = tetvr.Camera.fit(mesh, direction=(1.0, 0.05, -0.1)), _scene(mesh)[1]
+    ref = render_reference(mesh, camera, tf, SIZE)
+    monkeypatch.setattr(raymarch, "MAX_LAYERS", 1)
+    with Renderer(tetvr.RenderSettings(method="raymarch")) as r:
+        image = r.render(mesh, camera, tf, size=SIZE)
+        st = r._marcher.last_stats
+    assert st.layers_exhausted and st.n_suspect > 0
+    assert np.abs(image - ref).max() <= 1 / 255

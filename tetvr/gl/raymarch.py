@@ -55,7 +55,8 @@ from tetvr.gl.host import ProgramHost
 __all__ = ["Marcher", "MarchStats", "raymarch_capacity"]
 
 #: Most entry layers per frame: a ray leaving and entering the mesh more often than this
-#: (a mesh of many separate shells seen edge-on) stops there; the count is in the stats.
+#: (a mesh of many separate shells seen edge-on, gaps where zero-volume cells were dropped)
+#: is traced again exactly on the CPU (:mod:`tetvr.gl.selfcheck`); the count is in the stats.
 MAX_LAYERS = 64
 #: A walk stops once the transparency left is below this (early ray termination: what the
 #: rest of the ray could add is at most this much). Terminating at 2**-12 or 1e-3 instead
@@ -339,6 +340,9 @@ class Marcher:
         if rim is not None:
             rim.release()
         n_suspect, suspects = self._read_suspects()
+        if exhausted:  # rays that would enter again: traced again exactly, never cut off
+            suspects = np.union1d(suspects, _pending_entries(t))
+            n_suspect = max(n_suspect, int(suspects.size))  # beyond the list's length if the march's overflowed
         self.frames += 1
         self.last_stats = MarchStats(layers=layers, layers_exhausted=exhausted, entry_list=listed,
                                      n_near_cells=n_near_cells, n_rim_faces=rim.n_faces if rim is not None else 0,
@@ -584,3 +588,10 @@ class Marcher:
         if vao is None:
             vao = self._vaos[key] = self.ctx.vertex_array(prog, [])
         vao.render(moderngl.TRIANGLES, vertices=3)
+
+
+def _pending_entries(t: dict[str, Any]) -> NDArray[np.int64]:
+    """The pixels (GL rows, row 0 at the bottom) whose ray the last peel pass found another
+    entry for: after :data:`MAX_LAYERS` layers, the rays the march would cut off."""
+    depth = np.frombuffer(t["depth"].read(), dtype=np.float32)
+    return np.flatnonzero(depth < 1.0).astype(np.int64)

@@ -22,6 +22,13 @@ that touch share whole faces. Meshes as FEM and CFD tools write them are not alw
   face): somewhere two cells hold the same point, and a walk from cell to cell follows only
   one of them.
 
+* **gaps between cells**: where zero-volume cells were dropped (:meth:`TetMesh.from_arrays`),
+  or two parts' faces do not match, a ray leaves the mesh and enters it again at one depth.
+  The march takes each entry as one more layer (a pass over the screen and the boundary) and
+  is exact there; projected tetrahedra, whose cell order does not cross a gap, are not
+  (``tests/test_imperfect_meshes.py``). Nothing to route; the lattice below counts the most
+  entries along one ray (:attr:`WalkCheck.most_entries`), what a frame's passes follow.
+
 And **sizes float32 cannot walk**: the walk's products of coordinates (areas of triangles
 about the ray, times depths) overflow float32 beyond an extent of about 1e13 and lose the
 triangles about the ray where the cells are about 1e-12 across (measured on a cube and a
@@ -39,7 +46,7 @@ overlapping closed parts encloses exactly the sum of their volumes.) A lattice m
 overlap smaller than its spacing (1/64 to 1/256 of the mesh across); the frame statistics of
 the ray caster count what the walk finds inconsistent.
 
-``RenderSettings(method="auto")`` sends a mesh with any of the last three to projected
+``RenderSettings(method="auto")`` sends a mesh with any of the overlaps to projected
 tetrahedra, with one warning naming what was found (:func:`tetvr.order.method.choose`);
 ``method="raymarch"`` refuses it with the same words. All of it is found on the mesh of
 distinct cells.
@@ -91,6 +98,9 @@ class WalkCheck:
     lattice_rays : rays cast for the overlap test.
     typical_cell : the median over the cells of the longest edge.
     extent : the bounding-box diagonal.
+    most_entries : the most times one test ray enters the mesh's boundary, a gap between
+        cells (where zero-volume cells were dropped, or faces that do not match) counted as
+        leaving and entering again.
     """
 
     welded_points: int
@@ -102,6 +112,7 @@ class WalkCheck:
     lattice_rays: int
     typical_cell: float = 1.0
     extent: float = 1.0
+    most_entries: int = 1
 
     @property
     def reasons(self) -> tuple[str, ...]:
@@ -164,10 +175,11 @@ def walk_check(mesh: TetMesh) -> WalkCheck:
     cached = _CACHE.get(id(adj))
     if cached is not None and cached[0]() is adj:
         return cached[1]
-    overlap, rays = (0, 0) if distinct.n_conflicting or adj.n_nonmanifold_faces else _overlap_rays(mesh, adj)
+    overlap, rays, entries = ((0, 0, 0) if distinct.n_conflicting or adj.n_nonmanifold_faces
+                              else _overlap_rays(mesh, adj))
     check = WalkCheck(welded_points=adj.n_welded_points, repeated_cells=distinct.n_repeats,
                       conflicting_cells=distinct.n_conflicting, nonmanifold_faces=adj.n_nonmanifold_faces,
-                      folded_faces=folded_faces(mesh), overlap_rays=overlap, lattice_rays=rays,
+                      folded_faces=folded_faces(mesh), overlap_rays=overlap, lattice_rays=rays, most_entries=entries,
                       typical_cell=adj.cell_size,
                       extent=float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])))
     with _LOCK:
@@ -177,17 +189,18 @@ def walk_check(mesh: TetMesh) -> WalkCheck:
     return check
 
 
-def _overlap_rays(mesh: TetMesh, adj: FaceAdjacency) -> tuple[int, int]:
-    """(rays along which the boundary is entered twice before it is left, rays cast)."""
+def _overlap_rays(mesh: TetMesh, adj: FaceAdjacency) -> tuple[int, int, int]:
+    """(rays along which the boundary is entered twice before it is left, rays cast, the
+    most times one ray enters the boundary)."""
     if adj.convex:
-        return 0, 0  # one closed convex boundary: every ray enters once and leaves once
+        return 0, 0, 1  # one closed convex boundary: every ray enters once and leaves once
     grid = default_grid(adj.n_boundary_faces)
     centre = 0.5 * (mesh.bounds[0] + mesh.bounds[1])
     radius = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0])) / 2 or 1.0
     # Touching parts, and neighbouring faces that share the edge a ray passes through, give
     # an entry and an exit, or two entries, at one depth: within this tolerance hits are one.
     tol = 1e-9 * radius
-    found = 0
+    found = most = 0
     for direction in OVERLAP_DIRECTIONS:
         d = np.asarray(direction, dtype=np.float64)
         up = np.cross(d, (0.0, 0.0, 1.0) if abs(d[2]) < 0.9 else (1.0, 0.0, 0.0))
@@ -215,4 +228,9 @@ def _overlap_rays(mesh: TetMesh, adj: FaceAdjacency) -> tuple[int, int]:
         ray_starts = np.flatnonzero(first_of_ray)
         inside -= np.repeat(np.r_[0.0, inside[ray_starts[1:] - 1]], np.diff(np.r_[ray_starts, net.size]))
         found += int(np.unique(group_ray[inside > 1.5]).size)
-    return found, grid * grid * len(OVERLAP_DIRECTIONS)
+        # Entries, each a layer of tet marching: a gap between cells is left and entered
+        # again at one depth (its net sign is zero), so count the crossings that enter.
+        entering = np.bincount(group, weights=(sign > 0).astype(np.float64)) > 0
+        if entering.any():
+            most = max(most, int(np.bincount(group_ray[entering]).max()))
+    return found, grid * grid * len(OVERLAP_DIRECTIONS), most

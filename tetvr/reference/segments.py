@@ -100,11 +100,17 @@ def _check_chunk(chunk: int) -> int:
     return int(chunk)
 
 
-def _tet_geometry(mesh: TetMesh, camera: Camera, rays: EyeRays) -> _TetGeometry:
-    """Planes, scalar functions and candidate pixel boxes of the tets."""
+def _tet_geometry(mesh: TetMesh, camera: Camera, rays: EyeRays, pixels: Int | None = None) -> _TetGeometry:
+    """Planes, scalar functions and candidate pixel boxes of the tets (with ``pixels``,
+    row * width + column, only of the tets whose box may hold one of them)."""
     view = camera.view_matrix()
     pts = (mesh.points - np.asarray(camera.position)) @ view[:3, :3].T  # eye space
-    ids = np.sort(mesh.tets.astype(np.int64), axis=1)
+    ids = mesh.tets.astype(np.int64)
+    base = None
+    if pixels is not None:  # a few pixels of a large mesh: their tets first, cheaply
+        base = np.flatnonzero(_may_cover(pts, ids, rays, pixels))
+        ids = ids[base]
+    ids = np.sort(ids, axis=1)
     p = pts[ids]  # (m, 4, 3)
     depth = -p[:, :, 2]
 
@@ -115,6 +121,8 @@ def _tet_geometry(mesh: TetMesh, camera: Camera, rays: EyeRays) -> _TetGeometry:
     visible = (depth.max(axis=1) >= rays.near) & (depth.min(axis=1) <= rays.far) & (vol6 != 0)
     index = np.nonzero(visible)[0]
     p, depth, ids = p[index], depth[index], ids[index]
+    if base is not None:
+        index = base[index]  # ids into the mesh's tets
 
     col_lo, col_hi, row_lo, row_hi = _pixel_boxes(p, depth, rays)
     nonempty = (col_lo <= col_hi) & (row_lo <= row_hi)
@@ -159,6 +167,38 @@ def _tet_geometry(mesh: TetMesh, camera: Camera, rays: EyeRays) -> _TetGeometry:
         row_lo=row_lo,
         row_hi=row_hi,
     )
+
+
+def _may_cover(pts: Float, tets: Int, rays: EyeRays, pixels: Int) -> NDArray[np.bool_]:
+    """Per tet, whether its box (:func:`_pixel_boxes`) may hold one of ``pixels``: the box
+    of its vertices' projections where all lie in front of the near plane (the same box),
+    and every tet that reaches the near plane (its box comes from the cut; kept). A summed
+    table of the pixels counts those in each box."""
+    depth = -pts[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if rays.parallel:
+            col = pts[:, 0] / rays.kx
+            row = pts[:, 1] / rays.ky
+        else:
+            col = pts[:, 0] / (depth * rays.kx)
+            row = pts[:, 1] / (depth * rays.ky)
+    col = (col + 1.0) * (0.5 * rays.width) - 0.5
+    row = (1.0 - row) * (0.5 * rays.height) - 0.5
+    c, r = col[tets], row[tets]
+    c_lo = np.ceil(np.clip(c.min(axis=1) - _BOX_MARGIN_PX, -1, rays.width)).astype(np.int64)
+    c_hi = np.floor(np.clip(c.max(axis=1) + _BOX_MARGIN_PX, -1, rays.width)).astype(np.int64)
+    r_lo = np.ceil(np.clip(r.min(axis=1) - _BOX_MARGIN_PX, -1, rays.height)).astype(np.int64)
+    r_hi = np.floor(np.clip(r.max(axis=1) + _BOX_MARGIN_PX, -1, rays.height)).astype(np.int64)
+    c_lo, c_hi = np.maximum(c_lo, 0), np.minimum(c_hi, rays.width - 1)
+    r_lo, r_hi = np.maximum(r_lo, 0), np.minimum(r_hi, rays.height - 1)
+    mask = np.zeros((rays.height + 1, rays.width + 1), dtype=np.int64)
+    np.add.at(mask, (pixels // rays.width + 1, pixels % rays.width + 1), 1)
+    table = mask.cumsum(axis=0).cumsum(axis=1)
+    ok = (c_lo <= c_hi) & (r_lo <= r_hi)
+    c_lo, c_hi, r_lo, r_hi = (np.where(ok, a, 0) for a in (c_lo, c_hi, r_lo, r_hi))
+    held = table[r_hi + 1, c_hi + 1] - table[r_lo, c_hi + 1] - table[r_hi + 1, c_lo] + table[r_lo, c_lo]
+    reaches_near = False if rays.parallel else depth[tets].min(axis=1) < rays.near
+    return (ok & (held > 0)) | reaches_near | ~np.isfinite(c).all(axis=1) | ~np.isfinite(r).all(axis=1)
 
 
 def _pixel_boxes(p: Float, depth: Float, rays: EyeRays) -> tuple[Int, Int, Int, Int]:
@@ -379,7 +419,7 @@ def pixel_extents(mesh: TetMesh, camera: Camera, size: tuple[int, int], pixels: 
     rays = EyeRays.from_camera(camera, width, height)
     unique, back_of = np.unique(pixels, return_inverse=True)
     front, back = np.full(unique.size, np.inf), np.full(unique.size, -np.inf)
-    for seg in _pixel_segments(_tet_geometry(mesh, camera, rays), rays, unique, chunk):
+    for seg in _pixel_segments(_tet_geometry(mesh, camera, rays, unique), rays, unique, chunk):
         at = np.searchsorted(unique, seg.pixel)
         np.minimum.at(front, at, seg.t_in)
         np.maximum.at(back, at, seg.t_out)

@@ -155,8 +155,8 @@ def render_reference_pixels(
     """The pixels ``pixels`` (row * width + column, row 0 at the top) of
     :func:`render_reference`'s image, exactly as it renders them: (len(pixels), 4)
     float32 premultiplied RGBA. What a GPU frame that checks itself traces again where its
-    walk went wrong (:mod:`tetvr.gl.selfcheck`); its cost is one pass over the tets' boxes
-    per pixel.
+    walk went wrong (:mod:`tetvr.gl.selfcheck`); its cost is one pass over the tets to find
+    those whose boxes may hold the pixels, then one over theirs per pixel.
 
     Examples
     --------
@@ -179,7 +179,7 @@ def render_reference_pixels(
     unique, back = np.unique(pixels, return_inverse=True)
     norms = rays.norms()
     parts = []
-    for seg in _pixel_segments(_tet_geometry(mesh, camera, rays), rays, unique, chunk):
+    for seg in _pixel_segments(_tet_geometry(mesh, camera, rays, unique), rays, unique, chunk):
         rgb, theta = integrate_segments(seg.scalar_in, seg.scalar_out, (seg.t_out - seg.t_in) * norms[seg.pixel], tf,
                                         optics=optics)
         parts.append((np.searchsorted(unique, seg.pixel), seg.t_in, rgb, theta))

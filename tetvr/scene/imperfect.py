@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from tetvr.mesh import synthetic
 from tetvr.mesh.tetmesh import TetMesh
 
-__all__ = ["field", "regions", "copies", "conflicting_copies", "embedded_block", "cell_laid_over", "scaled"]
+__all__ = ["field", "regions", "copies", "conflicting_copies", "embedded_block", "cell_laid_over", "gaps", "scaled"]
 
 
 def field(p: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -73,6 +73,33 @@ def cell_laid_over() -> TetMesh:
     corners = np.array([[0.0, 0.0, 0.0], [0.3, 0.02, 0.05], [0.04, 0.31, 0.02], [0.03, 0.05, 0.29]]) - 0.1
     extra = TetMesh.from_arrays(corners, np.array([[0, 1, 2, 3]]), field(corners))
     return synthetic.merge(synthetic.cube(3, field, rotate=False), extra)
+
+
+def gaps(n: int = 4, layers: int = 12) -> TetMesh:
+    """Layers of hexahedra split into six tets each, every other layer split the mirror way,
+    so the two layers' triangles on the plane between them do not match: a ray crossing it
+    leaves the mesh and enters it again at one depth, as where a mesher's zero-volume cells
+    were dropped (``layers - 1`` such planes; :attr:`tetvr.order.walkable.WalkCheck.most_entries`).
+
+    Examples
+    --------
+    >>> gaps(2, 3).n_tets
+    72
+    """
+    ids = np.arange((n + 1) ** 2 * (layers + 1)).reshape(layers + 1, n + 1, n + 1)  # [z, y, x]
+    k, j, i = (a.reshape(-1) for a in np.meshgrid(np.arange(layers), np.arange(n), np.arange(n), indexing="ij"))
+    cells = []
+    for perm in ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)):  # Kuhn's six paths 0 -> 1
+        corner = np.zeros(3, dtype=np.int64)
+        path = [corner.copy()]
+        for axis in perm:
+            corner[axis] = 1
+            path.append(corner.copy())
+        cells.append(np.stack([ids[k + c[2], j + c[1], np.where(k % 2 == 1, i + 1 - c[0], i + c[0])]
+                               for c in path], axis=1))
+    z, y, x = np.meshgrid(np.arange(layers + 1), np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    points = np.stack([x.reshape(-1) / n, y.reshape(-1) / n, z.reshape(-1) / layers], axis=1) - 0.5
+    return TetMesh.from_arrays(points, np.concatenate(cells), field(points))
 
 
 def scaled(mesh: TetMesh, factor: float) -> TetMesh:
