@@ -50,6 +50,7 @@ from _common import (
     timed_repeats,
     write_json,
 )
+import corpus
 from tqdm import tqdm
 
 from tetvr.mesh import synthetic
@@ -123,6 +124,9 @@ def _mesh_specs(quick: bool, data_dir: Path) -> tuple[list[tuple[str, int, Calla
             specs.append((f"{path.stem.removesuffix('_tets')} ({field})", -1, functools.partial(load_quiet, path, field)))
     else:
         notes.append(f"skipped real meshes: {data_dir} does not exist")
+    # The unstructured meshes made here (bench/corpus.py: a torus fTetWild fills, ~200k tets;
+    # a Delaunay pipe with a boundary layer, ~900k), cached after the first run.
+    specs += [(name, 10**6, load) for name, load in corpus.meshes()]
     if quick:
         kept = [s for s in specs if s[1] <= QUICK_MAX_TETS]
         notes += [f"--quick: skipped {s[0]} ({s[1]} tets > {QUICK_MAX_TETS})" for s in specs if s not in kept]
