@@ -9,13 +9,14 @@ pipe and beam of ``../shared/data`` (``_common.REAL_MESHES``), this module makes
   ~200k tets), a swirling field on it -- the curved-surface mesh a user gets from a CAD or
   STL surface;
 * ``boundary layer``: a pipe whose points crowd towards the wall in a geometric boundary
-  layer (first layer 0.2 % of the radius, growth 1.25: cells up to ~60:1 at the wall),
-  joined by a Delaunay tetrahedralisation (``scipy.spatial.Delaunay``), with a developing
-  pipe-flow profile and a wake -- the graded, stretched cells of a CFD mesh (~1M tets).
+  layer (first layer 0.2 % of the radius, growth 1.25: cells ~50:1 at the wall),
+  joined by a Delaunay tetrahedralisation (``scipy.spatial.Delaunay``; the points jittered
+  by 5 % of the thinnest layer, or a tenth of the cells come out flat), with a developing
+  pipe-flow profile and a wake -- the graded, stretched cells of a CFD mesh (~920k tets).
 
-They take minutes to make on two cores, so each is kept in a cache folder
-(``$TETVR_BENCH_CACHE``, else ``~/.cache/tetvr/bench``) as ``.npz`` and made again only
-when it is missing. Neither is shipped: both are made from code here.
+The torus takes ~10 min to make on two cores (the pipe ~10 s), so each is kept in a cache
+folder (``$TETVR_BENCH_CACHE``, else ``~/.cache/tetvr/bench``) as ``.npz`` and made again
+only when it is missing. Neither is shipped: both are made from code here.
 
     python bench/corpus.py            # make (or load) each mesh and print its size
 """
@@ -26,7 +27,6 @@ import importlib.util
 import os
 import sys
 import time
-import warnings
 from pathlib import Path
 from typing import Callable
 
@@ -39,12 +39,8 @@ from tetvr.mesh.tetmesh import TetMesh  # noqa: E402
 
 #: fTetWild's target edge for the torus (major radius 1, minor 0.35): ~200k tets.
 TORUS_EDGE = 0.048
-#: The boundary-layer pipe: radius, length, wall layers (first thickness, growth), points
-#: around and along.
-PIPE_RADIUS, PIPE_LENGTH = 1.0, 6.0
-WALL_FIRST, WALL_GROWTH, WALL_LAYERS = 0.002, 1.25, 18
+#: The boundary-layer pipe's points around each ring and rings along it (~920k tets).
 PIPE_AROUND, PIPE_ALONG = 64, 80
-
 
 def cache_dir() -> Path:
     """Where made meshes are kept: ``$TETVR_BENCH_CACHE``, else ``~/.cache/tetvr/bench``."""
@@ -88,54 +84,12 @@ def torus_tetwild() -> TetMesh:
     return _cached(f"torus_tetwild_{TORUS_EDGE:g}", make)
 
 
-def _pipe_points(rng: np.random.Generator) -> np.ndarray:
-    """Points of the pipe: rings graded towards the wall, a jittered core."""
-    layers = PIPE_RADIUS - WALL_FIRST * np.cumsum(WALL_GROWTH ** np.arange(WALL_LAYERS))
-    layers = np.concatenate([[PIPE_RADIUS], layers[layers > 0.35 * PIPE_RADIUS]])
-    z = np.linspace(0.0, PIPE_LENGTH, PIPE_ALONG)
-    angle = np.linspace(0.0, 2.0 * np.pi, PIPE_AROUND, endpoint=False)
-    rings = []
-    for i, r in enumerate(layers):
-        a = angle + (0.5 * i % 1.0) * (angle[1] - angle[0])  # layers staggered around
-        rr, zz = np.meshgrid(np.full(a.shape, r), z, indexing="ij")
-        aa = np.broadcast_to(a[:, None], rr.shape)
-        rings.append(np.stack([rr * np.cos(aa), rr * np.sin(aa), zz], axis=-1).reshape(-1, 3))
-    # The core: random points up to the innermost layer (Delaunay's cells there are isotropic).
-    inner = layers[-1]
-    h = 2.0 * np.pi * inner / PIPE_AROUND
-    n_core = int(np.pi * inner**2 * PIPE_LENGTH / h**3 * 1.2)
-    u = rng.random((n_core, 3))
-    r = 0.97 * inner * np.sqrt(u[:, 0])
-    a = 2.0 * np.pi * u[:, 1]
-    core = np.stack([r * np.cos(a), r * np.sin(a), PIPE_LENGTH * u[:, 2]], axis=-1)
-    return np.concatenate(rings + [core])
-
-
-def _pipe_flow(p: np.ndarray) -> np.ndarray:
-    """Axial velocity of a developing pipe flow: a boundary layer thickening downstream, and
-    the wake of an obstacle on the axis."""
-    r = np.hypot(p[:, 0], p[:, 1]) / PIPE_RADIUS
-    delta = 0.02 + 0.08 * p[:, 2] / PIPE_LENGTH
-    wall = np.tanh((1.0 - r) / delta)
-    wake = 0.6 * np.exp(-((p[:, 0] - 0.2) ** 2 + p[:, 1] ** 2) / 0.05 - (p[:, 2] - 2.0) / 2.5) * (p[:, 2] > 2.0)
-    return wall * (1.0 + 0.3 * (1.0 - r**2)) - wake
-
-
 def boundary_layer() -> TetMesh:
-    """A pipe with a graded wall layer, Delaunay-tetrahedralised, ~1M tets (cached)."""
-    def make() -> TetMesh:
-        from scipy.spatial import Delaunay
+    """A pipe with a graded wall layer, Delaunay-tetrahedralised
+    (:func:`tetvr.scene.imperfect.delaunay_pipe`), ~920k tets (cached)."""
+    from tetvr.scene.imperfect import delaunay_pipe
 
-        rng = np.random.default_rng(7)
-        pts = _pipe_points(rng)
-        # Points on exact circles and planes make a tenth of Delaunay's cells flat (dropped,
-        # they leave gaps); a jitter of 5 % of the thinnest layer leaves a few.
-        pts += rng.normal(scale=0.05 * WALL_FIRST, size=pts.shape)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # "dropped N zero-volume tetrahedra"
-            return TetMesh.from_arrays(pts, Delaunay(pts).simplices, _pipe_flow(pts), scalar_name="velocity")
-
-    return _cached(f"boundary_layer_{PIPE_AROUND}x{PIPE_ALONG}_jittered", make)
+    return _cached(f"boundary_layer_{PIPE_AROUND}x{PIPE_ALONG}_jittered", lambda: delaunay_pipe(PIPE_AROUND, PIPE_ALONG))
 
 
 def meshes() -> list[tuple[str, Callable[[], TetMesh]]]:

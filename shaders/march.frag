@@ -483,6 +483,9 @@ void main() {
             // The exit behind the entry: not this tet's (a face seen edge-on, whose points'
             // weights are rounding, or a walk gone astray): traced again (tetvr.gl.selfcheck).
             astray = astray || (t_in - t_w) * per_t > u_slack;
+            // A walk gone astray may circle for the rest of the step bound (the mesh's cell
+            // count): stop it here; the ray is traced again on the CPU.
+            if (astray) break;
             ended = composite(acc, t_in, s_in, t_out, s_out, win, per_t);
             if (ended) break;
             link = tet_link(tet, k);
