@@ -19,7 +19,7 @@ makes rasteriser fill conventions watertight).
 from __future__ import annotations
 
 import dataclasses
-from typing import Iterator, NamedTuple
+from typing import Any, Iterator, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -173,32 +173,36 @@ def _may_cover(pts: Float, tets: Int, rays: EyeRays, pixels: Int) -> NDArray[np.
     """Per tet, whether its box (:func:`_pixel_boxes`) may hold one of ``pixels``: the box
     of its vertices' projections where all lie in front of the near plane (the same box),
     and every tet that reaches the near plane (its box comes from the cut; kept). A summed
-    table of the pixels counts those in each box."""
+    table of the pixels counts those in each box. Per point, then four columns of the tets
+    (numpy reduces a short last axis slowly)."""
     depth = -pts[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        if rays.parallel:
-            col = pts[:, 0] / rays.kx
-            row = pts[:, 1] / rays.ky
-        else:
-            col = pts[:, 0] / (depth * rays.kx)
-            row = pts[:, 1] / (depth * rays.ky)
-    col = (col + 1.0) * (0.5 * rays.width) - 0.5
-    row = (1.0 - row) * (0.5 * rays.height) - 0.5
-    c, r = col[tets], row[tets]
-    c_lo = np.ceil(np.clip(c.min(axis=1) - _BOX_MARGIN_PX, -1, rays.width)).astype(np.int64)
-    c_hi = np.floor(np.clip(c.max(axis=1) + _BOX_MARGIN_PX, -1, rays.width)).astype(np.int64)
-    r_lo = np.ceil(np.clip(r.min(axis=1) - _BOX_MARGIN_PX, -1, rays.height)).astype(np.int64)
-    r_hi = np.floor(np.clip(r.max(axis=1) + _BOX_MARGIN_PX, -1, rays.height)).astype(np.int64)
-    c_lo, c_hi = np.maximum(c_lo, 0), np.minimum(c_hi, rays.width - 1)
-    r_lo, r_hi = np.maximum(r_lo, 0), np.minimum(r_hi, rays.height - 1)
+        scale = 1.0 if rays.parallel else depth
+        col = (pts[:, 0] / (scale * rays.kx) + 1.0) * (0.5 * rays.width) - 0.5
+        row = (1.0 - pts[:, 1] / (scale * rays.ky)) * (0.5 * rays.height) - 0.5
+    loose = ~(np.isfinite(col) & np.isfinite(row))  # a point whose projection bounds nothing
+    if not rays.parallel:
+        loose |= depth < rays.near
+    t = [np.ascontiguousarray(tets[:, k]) for k in range(4)]
+
+    def pick(v: Float, f: Any) -> Float:
+        return f(f(v[t[0]], v[t[1]]), f(v[t[2]], v[t[3]]))
+
+    kept = loose[t[0]] | loose[t[1]] | loose[t[2]] | loose[t[3]]
+    col, row = np.where(loose, 0.0, col), np.where(loose, 0.0, row)
+    c_lo = np.maximum(np.ceil(np.clip(pick(col, np.minimum) - _BOX_MARGIN_PX, -1, rays.width)), 0).astype(np.int64)
+    c_hi = np.minimum(np.floor(np.clip(pick(col, np.maximum) + _BOX_MARGIN_PX, -1, rays.width)),
+                      rays.width - 1).astype(np.int64)
+    r_lo = np.maximum(np.ceil(np.clip(pick(row, np.minimum) - _BOX_MARGIN_PX, -1, rays.height)), 0).astype(np.int64)
+    r_hi = np.minimum(np.floor(np.clip(pick(row, np.maximum) + _BOX_MARGIN_PX, -1, rays.height)),
+                      rays.height - 1).astype(np.int64)
     mask = np.zeros((rays.height + 1, rays.width + 1), dtype=np.int64)
     np.add.at(mask, (pixels // rays.width + 1, pixels % rays.width + 1), 1)
     table = mask.cumsum(axis=0).cumsum(axis=1)
     ok = (c_lo <= c_hi) & (r_lo <= r_hi)
     c_lo, c_hi, r_lo, r_hi = (np.where(ok, a, 0) for a in (c_lo, c_hi, r_lo, r_hi))
     held = table[r_hi + 1, c_hi + 1] - table[r_lo, c_hi + 1] - table[r_hi + 1, c_lo] + table[r_lo, c_lo]
-    reaches_near = False if rays.parallel else depth[tets].min(axis=1) < rays.near
-    return (ok & (held > 0)) | reaches_near | ~np.isfinite(c).all(axis=1) | ~np.isfinite(r).all(axis=1)
+    return (ok & (held > 0)) | kept
 
 
 def _pixel_boxes(p: Float, depth: Float, rays: EyeRays) -> tuple[Int, Int, Int, Int]:
