@@ -82,10 +82,13 @@ def test_reference_pixels_are_the_reference_images_pixels():
         render_reference_pixels(mesh, camera, tf, SIZE, [SIZE[0] * SIZE[1]])
 
 
+@pytest.mark.parametrize("chunk", [1 << 18, 64], ids=["by tiles", "pixel by pixel"])
 @pytest.mark.parametrize("view", ["inside", "parallel", "outside"])
-def test_reference_pixels_of_a_few_pixels_cull_no_tet_they_need(view):
+def test_reference_pixels_of_a_few_pixels_cull_no_tet_they_need(view, chunk):
     """The pixels' tets are found first by their vertices' boxes (every tet the near plane
-    cuts kept): the values are the full image's, bit for bit."""
+    cuts kept), then through the screen tiles the boxes cover (or, where the boxes would
+    cover too many tiles for the chunk, pixel by pixel): the values are the full image's,
+    bit for bit."""
     mesh = synthetic.torus()
     camera = tetvr.Camera.fit(mesh, direction=(0.3, -0.8, -0.5), parallel=view == "parallel")
     if view == "inside":  # the eye in the tube: the near plane cuts cells
@@ -94,7 +97,8 @@ def test_reference_pixels_of_a_few_pixels_cull_no_tet_they_need(view):
     full = render_reference(mesh, camera, tf, SIZE).reshape(-1, 4)
     assert np.count_nonzero(full[:, 3] > 0.01) > 100
     pixels = np.random.default_rng(3).choice(SIZE[0] * SIZE[1], 60, replace=False)
-    np.testing.assert_array_equal(render_reference_pixels(mesh, camera, tf, SIZE, pixels), full[pixels])
+    np.testing.assert_array_equal(render_reference_pixels(mesh, camera, tf, SIZE, pixels, chunk=chunk),
+                                  full[pixels])
 
 
 def test_rays_past_the_last_layer_are_traced_again(monkeypatch):

@@ -276,18 +276,49 @@ def _clip_chunk(geo: _TetGeometry, rays: EyeRays, tets: Int, counts: Int, box_w:
     return _clip_pairs(geo, rays, tet, row, col)
 
 
+#: Screen tiles (pixels a side) through which the rays of a few pixels find their tets.
+_TILE = 16
+
+
 def _pixel_segments(geo: _TetGeometry, rays: EyeRays, pixels: Int, chunk: int) -> Iterator[RaySegments]:
-    """Ray-tet segments of the rays through ``pixels`` only (row * width + column): each
-    pixel's candidate tets are those whose box holds it, a few pixels at a time."""
-    per = max(1, chunk // max(1, geo.col_lo.shape[0]))
-    for start in range(0, pixels.size, per):
-        some = pixels[start:start + per]
-        row, col = some // rays.width, some % rays.width
-        inside = ((geo.col_lo[None, :] <= col[:, None]) & (col[:, None] <= geo.col_hi[None, :])
-                  & (geo.row_lo[None, :] <= row[:, None]) & (row[:, None] <= geo.row_hi[None, :]))
-        which, tet = np.nonzero(inside)
-        if tet.size:
-            yield _clip_pairs(geo, rays, tet, row[which], col[which])
+    """Ray-tet segments of the rays through ``pixels`` only (row * width + column, sorted):
+    each pixel's candidate tets are those whose box holds it, found through the screen tiles
+    the boxes cover, then in the order the whole image takes them (by tet, per pixel)."""
+    row, col = pixels // rays.width, pixels % rays.width
+    tiles_x = -(-rays.width // _TILE)
+    c0, r0 = geo.col_lo // _TILE, geo.row_lo // _TILE
+    w = geo.col_hi // _TILE - c0 + 1
+    n = w * (geo.row_hi // _TILE - r0 + 1)  # tiles per box
+    if int(n.sum()) > 16 * chunk:  # boxes over much of the screen: pixel by pixel, every box
+        per = max(1, chunk // max(1, geo.col_lo.shape[0]))
+        for start in range(0, pixels.size, per):
+            some = slice(start, start + per)
+            inside = ((geo.col_lo[None, :] <= col[some, None]) & (col[some, None] <= geo.col_hi[None, :])
+                      & (geo.row_lo[None, :] <= row[some, None]) & (row[some, None] <= geo.row_hi[None, :]))
+            which, tet = np.nonzero(inside)
+            if tet.size:
+                yield _clip_pairs(geo, rays, tet, row[some][which], col[some][which])
+        return
+    tile = (row // _TILE) * tiles_x + col // _TILE
+    order = np.argsort(tile, kind="stable")
+    first = np.searchsorted(tile[order], np.arange(tiles_x * -(-rays.height // _TILE) + 1))
+    held = np.diff(first)  # the pixels in each tile: order[first[k]:first[k + 1]]
+    tet = np.repeat(np.arange(n.size), n)
+    k = np.arange(tet.size) - np.repeat(np.cumsum(n) - n, n)
+    box_tile = (r0[tet] + k // w[tet]) * tiles_x + c0[tet] + k % w[tet]
+    keep = held[box_tile] > 0
+    tet, box_tile = tet[keep], box_tile[keep]
+    m = held[box_tile]
+    tet = np.repeat(tet, m)
+    px = order[np.repeat(first[box_tile], m) + np.arange(tet.size) - np.repeat(np.cumsum(m) - m, m)]
+    inside = ((geo.col_lo[tet] <= col[px]) & (col[px] <= geo.col_hi[tet])
+              & (geo.row_lo[tet] <= row[px]) & (row[px] <= geo.row_hi[tet]))
+    tet, px = tet[inside], px[inside]
+    by = np.lexsort((tet, px))
+    tet, px = tet[by], px[by]
+    for start in range(0, px.size, chunk):
+        some = slice(start, start + chunk)
+        yield _clip_pairs(geo, rays, tet[some], row[px[some]], col[px[some]])
 
 
 def _clip_pairs(geo: _TetGeometry, rays: EyeRays, tet: Int, row: Int, col: Int) -> RaySegments:
