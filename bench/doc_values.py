@@ -167,6 +167,41 @@ def large_meshes() -> str:
             f"{r['machine']['cpu_count']} cores (`bench/results/vs_vtk.json`)")
 
 
+def _vs_vtk_both() -> tuple[dict[str, Any], dict[str, Any], list[tuple[dict[str, Any], dict[str, Any]]]]:
+    """Both sizes' runs of bench/vs_vtk.py and their meshes paired by name."""
+    small, large = _load(RESULTS / "vs_vtk.json"), _load(RESULTS / "vs_vtk_1024.json")
+    at = {m["name"]: m for m in large["meshes"]}
+    return small, large, [(m, at[m["name"]]) for m in small["meshes"] if m["name"] in at]
+
+
+def vs_vtk_pixels() -> str:
+    """bench/README.md: how each renderer's view change grows from the first size to the
+    second (4x the pixels), median over the meshes measured at both."""
+    small, large, pairs = _vs_vtk_both()
+    ratio = {k: sorted(b["view_change_median_s"][k] / a["view_change_median_s"][k] for a, b in pairs)
+             for k in ("tetvr", "vtk_pt")}
+    med = {k: v[len(v) // 2] if len(v) % 2 else 0.5 * (v[len(v) // 2 - 1] + v[len(v) // 2]) for k, v in ratio.items()}
+    return (f"from {small['size'][0]}² to {large['size'][0]}² (4x the pixels) the default's view change takes "
+            f"{med['tetvr']:.1f}x as long ({ratio['tetvr'][0]:.1f}–{ratio['tetvr'][-1]:.1f}x) and VTK's "
+            f"{med['vtk_pt']:.1f}x ({ratio['vtk_pt'][0]:.1f}–{ratio['vtk_pt'][-1]:.1f}x), median over the "
+            f"{len(pairs)} meshes measured at both (`bench/results/vs_vtk.json`, `vs_vtk_1024.json`)")
+
+
+def vs_vtk_missed() -> str:
+    """bench/README.md: the targets of bench/vs_vtk.py missed, mesh by mesh, at both sizes."""
+    parts = []
+    for name in ("vs_vtk.json", "vs_vtk_1024.json"):
+        r = _load(RESULTS / name)
+        size = f"{r['size'][0]}²"
+        view = [f"{m['name'].split(' (')[0]} {m['target']['speedup']:.2f}x of {m['target']['speedup_wanted']:g}x"
+                for m in r["meshes"] if m["target"]["applies"] and m["target"]["speedup"] < m["target"]["speedup_wanted"]]
+        first = [f"{m['name'].split(' (')[0]} {m['target']['first_frame']:.2f}x" for m in r["meshes"]
+                 if not m["target"]["first_frame_met"]]
+        parts.append(f"at {size}, per view change " + (", ".join(view) or "none")
+                     + "; first frame " + (", ".join(first) or "none"))
+    return "; ".join(parts)
+
+
 def spiky_even() -> str:
     """docs/limits.md: the spiky transfer functions on even tables (bench/spiky_tf.py)."""
     rows = [r for r in _load(RESULTS / "spiky_tf.json")["rows"] if r["tf"] != "smooth" and not r["table"]["warp"]]
@@ -270,7 +305,8 @@ def VALUES() -> dict[str, Callable[[], str]]:  # noqa: N802 - read like the TABL
         "table_filter": table_filter, "smooth_tf_psnr": smooth_tf_psnr, "framebuffer_vs_table": framebuffer_vs_table,
         "auto_table_sizes": auto_table_sizes, "table_build": table_build, "scalar_bins_auto": scalar_bins_auto,
         "align_nodes": align_nodes, "slices_vs_fixed": slices_vs_fixed, "centroid_sort": centroid_sort,
-        "large_meshes": large_meshes, "spiky_even": spiky_even, "rings_bricks": rings_bricks,
+        "large_meshes": large_meshes, "vs_vtk_pixels": vs_vtk_pixels, "vs_vtk_missed": vs_vtk_missed,
+        "spiky_even": spiky_even, "rings_bricks": rings_bricks,
         "anatomy_own": anatomy_own, "anatomy_convention": anatomy_convention, "anatomy_colour": anatomy_colour,
         "install_time": install_time, "extras_sizes": extras_sizes, "notebook_times": notebook_times}
     for name in _methods():
