@@ -105,12 +105,12 @@ def _tet_geometry(mesh: TetMesh, camera: Camera, rays: EyeRays, pixels: Int | No
     row * width + column, only of the tets whose box may hold one of them)."""
     view = camera.view_matrix()
     pts = (mesh.points - np.asarray(camera.position)) @ view[:3, :3].T  # eye space
-    ids = mesh.tets.astype(np.int64)
     base = None
+    ids = mesh.tets
     if pixels is not None:  # a few pixels of a large mesh: their tets first, cheaply
         base = np.flatnonzero(_may_cover(pts, ids, rays, pixels))
         ids = ids[base]
-    ids = np.sort(ids, axis=1)
+    ids = np.sort(ids.astype(np.int64), axis=1)
     p = pts[ids]  # (m, 4, 3)
     depth = -p[:, :, 2]
 
@@ -171,15 +171,13 @@ def _tet_geometry(mesh: TetMesh, camera: Camera, rays: EyeRays, pixels: Int | No
 
 def _may_cover(pts: Float, tets: Int, rays: EyeRays, pixels: Int) -> NDArray[np.bool_]:
     """Per tet, whether its box (:func:`_pixel_boxes`) may hold one of ``pixels``: the box
-    of its vertices' projections where all lie in front of the near plane (the same box),
-    and every tet that reaches the near plane (its box comes from the cut; kept). A summed
-    table of the pixels counts those in each box. Per point, then four columns of the tets
-    (numpy reduces a short last axis slowly)."""
+    of its vertices' projections where all lie in front of the near plane (the same box,
+    by the same arithmetic), and every tet that reaches the near plane (its box comes from
+    the cut; kept). A summed table of the pixels counts those in each box. Per point, then
+    four columns of the tets (numpy reduces a short last axis slowly)."""
     depth = -pts[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        scale = 1.0 if rays.parallel else depth
-        col = (pts[:, 0] / (scale * rays.kx) + 1.0) * (0.5 * rays.width) - 0.5
-        row = (1.0 - pts[:, 1] / (scale * rays.ky)) * (0.5 * rays.height) - 0.5
+        col, row = _pixel_coords(pts[:, 0], pts[:, 1], None if rays.parallel else depth, rays)
     loose = ~(np.isfinite(col) & np.isfinite(row))  # a point whose projection bounds nothing
     if not rays.parallel:
         loose |= depth < rays.near
@@ -190,12 +188,8 @@ def _may_cover(pts: Float, tets: Int, rays: EyeRays, pixels: Int) -> NDArray[np.
 
     kept = loose[t[0]] | loose[t[1]] | loose[t[2]] | loose[t[3]]
     col, row = np.where(loose, 0.0, col), np.where(loose, 0.0, row)
-    c_lo = np.maximum(np.ceil(np.clip(pick(col, np.minimum) - _BOX_MARGIN_PX, -1, rays.width)), 0).astype(np.int64)
-    c_hi = np.minimum(np.floor(np.clip(pick(col, np.maximum) + _BOX_MARGIN_PX, -1, rays.width)),
-                      rays.width - 1).astype(np.int64)
-    r_lo = np.maximum(np.ceil(np.clip(pick(row, np.minimum) - _BOX_MARGIN_PX, -1, rays.height)), 0).astype(np.int64)
-    r_hi = np.minimum(np.floor(np.clip(pick(row, np.maximum) + _BOX_MARGIN_PX, -1, rays.height)),
-                      rays.height - 1).astype(np.int64)
+    c_lo, c_hi, r_lo, r_hi = _box(pick(col, np.minimum), pick(col, np.maximum), pick(row, np.minimum),
+                                  pick(row, np.maximum), rays)
     mask = np.zeros((rays.height + 1, rays.width + 1), dtype=np.int64)
     np.add.at(mask, (pixels // rays.width + 1, pixels % rays.width + 1), 1)
     table = mask.cumsum(axis=0).cumsum(axis=1)
@@ -205,13 +199,31 @@ def _may_cover(pts: Float, tets: Int, rays: EyeRays, pixels: Int) -> NDArray[np.
     return (ok & (held > 0)) | kept
 
 
+def _pixel_coords(x: Float, y: Float, depth: Float | None, rays: EyeRays) -> tuple[Float, Float]:
+    """Column and row of eye-space ``x``, ``y`` (at ``depth`` in perspective, None in parallel
+    projection), pixel centre (row i, col j) at x_ndc = 2 (j + 0.5) / W - 1, y_ndc = 1 - 2 (i + 0.5) / H."""
+    x_ndc = x / rays.kx if depth is None else x / (depth * rays.kx)
+    y_ndc = y / rays.ky if depth is None else y / (depth * rays.ky)
+    return (x_ndc + 1.0) * (0.5 * rays.width) - 0.5, (1.0 - y_ndc) * (0.5 * rays.height) - 0.5
+
+
+def _box(col_min: Float, col_max: Float, row_min: Float, row_max: Float, rays: EyeRays) -> tuple[Int, Int, Int, Int]:
+    """The inclusive pixel ranges of a box of columns and rows, widened by the margin and
+    clipped to the image (in float first: boxes far outside must not overflow int64)."""
+    col_lo = np.ceil(np.clip(col_min - _BOX_MARGIN_PX, -1, rays.width)).astype(np.int64)
+    col_hi = np.floor(np.clip(col_max + _BOX_MARGIN_PX, -1, rays.width)).astype(np.int64)
+    row_lo = np.ceil(np.clip(row_min - _BOX_MARGIN_PX, -1, rays.height)).astype(np.int64)
+    row_hi = np.floor(np.clip(row_max + _BOX_MARGIN_PX, -1, rays.height)).astype(np.int64)
+    return (np.maximum(col_lo, 0), np.minimum(col_hi, rays.width - 1), np.maximum(row_lo, 0),
+            np.minimum(row_hi, rays.height - 1))
+
+
 def _pixel_boxes(p: Float, depth: Float, rays: EyeRays) -> tuple[Int, Int, Int, Int]:
     """Inclusive column and row range of the pixel centres each tet can cover."""
     if rays.parallel:
         # Affine projection: the vertices bound the shadow.
-        x_ndc = p[:, :, 0] / rays.kx
-        y_ndc = p[:, :, 1] / rays.ky
-        valid = np.ones(x_ndc.shape, dtype=bool)
+        col, row = _pixel_coords(p[:, :, 0], p[:, :, 1], None, rays)
+        valid = np.ones(col.shape, dtype=bool)
     else:
         # Perspective: bound the part of the tet in front of the near plane, the convex
         # hull of the vertices there and the points where edges cross the plane. All
@@ -224,27 +236,9 @@ def _pixel_boxes(p: Float, depth: Float, rays: EyeRays) -> tuple[Int, Int, Int, 
         cut = p[:, ia] + lam[:, :, None] * (p[:, ib] - p[:, ia])
         q = np.concatenate([p, cut], axis=1)  # (m, 10, 3)
         valid = np.concatenate([depth >= rays.near, crosses], axis=1)
-        q_depth = np.where(valid, -q[:, :, 2], 1.0)
-        x_ndc = q[:, :, 0] / (q_depth * rays.kx)
-        y_ndc = q[:, :, 1] / (q_depth * rays.ky)
-    # Pixel centre (row i, col j) sits at x_ndc = 2 (j + 0.5) / W - 1, y_ndc = 1 - 2 (i + 0.5) / H.
-    col = (x_ndc + 1.0) * (0.5 * rays.width) - 0.5
-    row = (1.0 - y_ndc) * (0.5 * rays.height) - 0.5
-    col_min = np.where(valid, col, np.inf).min(axis=1)
-    col_max = np.where(valid, col, -np.inf).max(axis=1)
-    row_min = np.where(valid, row, np.inf).min(axis=1)
-    row_max = np.where(valid, row, -np.inf).max(axis=1)
-    # Clip in float first: boxes far outside the image must not overflow int64.
-    col_lo = np.ceil(np.clip(col_min - _BOX_MARGIN_PX, -1, rays.width)).astype(np.int64)
-    col_hi = np.floor(np.clip(col_max + _BOX_MARGIN_PX, -1, rays.width)).astype(np.int64)
-    row_lo = np.ceil(np.clip(row_min - _BOX_MARGIN_PX, -1, rays.height)).astype(np.int64)
-    row_hi = np.floor(np.clip(row_max + _BOX_MARGIN_PX, -1, rays.height)).astype(np.int64)
-    return (
-        np.maximum(col_lo, 0),
-        np.minimum(col_hi, rays.width - 1),
-        np.maximum(row_lo, 0),
-        np.minimum(row_hi, rays.height - 1),
-    )
+        col, row = _pixel_coords(q[:, :, 0], q[:, :, 1], np.where(valid, -q[:, :, 2], 1.0), rays)
+    return _box(np.where(valid, col, np.inf).min(axis=1), np.where(valid, col, -np.inf).max(axis=1),
+                np.where(valid, row, np.inf).min(axis=1), np.where(valid, row, -np.inf).max(axis=1), rays)
 
 
 def _iter_segments(geo: _TetGeometry, rays: EyeRays, chunk: int) -> Iterator[RaySegments]:
