@@ -42,6 +42,7 @@ TORUS_EDGE = 0.048
 #: The boundary-layer pipe's points around each ring and rings along it (~920k tets).
 PIPE_AROUND, PIPE_ALONG = 64, 80
 
+
 def cache_dir() -> Path:
     """Where made meshes are kept: ``$TETVR_BENCH_CACHE``, else ``~/.cache/tetvr/bench``."""
     env = os.environ.get("TETVR_BENCH_CACHE")
