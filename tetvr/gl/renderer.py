@@ -38,6 +38,7 @@ from tetvr.gl.raymarch import Marcher, raymarch_capacity
 from tetvr.gl.selfcheck import retrace, retrace_extent
 from tetvr.gl.vtkpt import VTKParity, vtk_depth_order
 from tetvr.gl.surfaces import RayWindow, SurfacePass
+from tetvr.gl.tablebuild import TableRuns
 from tetvr.core.surface import Surface, check_surfaces
 from tetvr.gl.util import (Clock, GLOwner, check_size, clear_gl_errors, gl_locked, locked, make_target, set_uniforms,
                    table_texture, tf_points_texture)
@@ -180,7 +181,8 @@ class Renderer(GLOwner):
                     "march_entry": {"vertex_shader": "march_entry.vert", "fragment_shader": "march_entry.frag"},
                     "march": {"vertex_shader": "raycast.vert", "fragment_shader": "march.frag"},
                     "march_mark": {"vertex_shader": "raycast.vert", "fragment_shader": "march_mark.frag"},
-                    "surface": {"vertex_shader": "surface.vert", "fragment_shader": "surface.frag"}}
+                    "surface": {"vertex_shader": "surface.vert", "fragment_shader": "surface.frag"},
+                    "table_runs": {"compute_shader": "table_runs.comp"}}
         if kind not in programs:
             raise ValueError(f"unknown shader {kind!r}; choose one of {sorted(programs)}")
         stages = programs[kind]
@@ -257,7 +259,8 @@ class Renderer(GLOwner):
         size = resolve_table_size(s, tf, mesh)
         table = table_for(tf, mesh.scalar_range, mesh.max_edge, n_bins=size.n_bins, n_slices=size.n_slices,
                           log_base=size.log_base, encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics,
-                          align_nodes=s.table_align_nodes, warp=size.warp)
+                          align_nodes=s.table_align_nodes, warp=size.warp,
+                          runs=TableRuns(self.ctx, lambda: self._program("table_runs")))
         self._table_cache = (key, table)
         return table
 

@@ -278,9 +278,10 @@ def table_texture(ctx: Any, table: "PreintegrationTable") -> Any:
     import moderngl
 
     k1, n, _, _ = table.data.shape  # (slice, back, front, RGBA)
-    texels = np.moveaxis(table.data, 0, 2)  # (back, front, slice, RGBA); tobytes() lays it out in C order
+    texels = np.moveaxis(table.data, 0, 2)  # (back, front, slice, RGBA), in C order below
     dtype = "f4" if texels.dtype == np.float32 else "f1"
-    tex = ctx.texture3d((k1, n, n), 4, texels.tobytes(), dtype=dtype)
+    # A table built in this layout (tetvr.gl.tablebuild) is uploaded as it is, without a copy.
+    tex = ctx.texture3d((k1, n, n), 4, texels if texels.flags.c_contiguous else texels.tobytes(), dtype=dtype)
     tex.repeat_x = tex.repeat_y = tex.repeat_z = False
     tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
     extras = {}

@@ -40,9 +40,10 @@ Encodings
 
 from __future__ import annotations
 
-import functools
+import collections
 import math
-from typing import Any
+import threading
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -55,7 +56,20 @@ from tetvr.optics.tablesteps import corner_blocks
 from tetvr.optics.tablewarp import extinction_cells, max_warped_nodes, node_opacity_cells, warped_nodes
 from tetvr.optics.transfer import TransferFunction
 
-__all__ = ["build_table", "table_for"]
+__all__ = ["build_table", "table_for", "TableRunsBuilder"]
+
+
+class TableRunsBuilder(Protocol):
+    """Builds a "normalized" float32 table's off-diagonal entries elsewhere (the GPU:
+    :class:`tetvr.gl.tablebuild.TableRuns`): from each bin's colour at its start and end
+    (N - 1 x RGB), its mean extinction, their prefix sum (N) and the K slices'
+    thicknesses, it writes ``out[sb, sf, k]`` (N, N, K + 1, RGBA float32, the layout of
+    :func:`tetvr.gl.util.table_texture`) for ``sf != sb`` and ``k >= 1`` as
+    :func:`build_table` would: :func:`_fill_runs`' colours encoded by :func:`_encoded`
+    (what it leaves in slice 0 and on the diagonal is overwritten)."""
+
+    def __call__(self, start: NDArray[np.float64], end: NDArray[np.float64], tau_bin: NDArray[np.float64],
+                 prefix: NDArray[np.float64], thick: NDArray[np.float64], out: NDArray[np.float32]) -> None: ...
 
 # Largest extinction (per world unit) stored in a "normalized" table. A tiny unit distance
 # gives extinctions past float32's range: stored as inf, the shader's d * inf at d = 0 is
@@ -76,6 +90,7 @@ def table_for(
     optics: str = "exact",
     align_nodes: bool = False,
     warp: bool = False,
+    runs: TableRunsBuilder | None = None,
 ) -> PreintegrationTable:
     """The table for a transfer function and a mesh, from a cache keyed by all inputs.
 
@@ -84,7 +99,8 @@ def table_for(
     transfer function's steps or control points where that helps
     (:func:`~tetvr.optics.table.aligned_nodes`, which may add a few nodes to put every
     step on one); with ``warp`` they are placed where the transfer function varies instead
-    (:mod:`tetvr.optics.tablewarp`; ``align_nodes`` does not apply).
+    (:mod:`tetvr.optics.tablewarp`; ``align_nodes`` does not apply). ``runs``: where a
+    table is built, :func:`build_table`'s ``runs`` (not part of the key: it builds the same table).
     """
     # Thicknesses are rounded up to 7 significant digits so near-equal meshes share a table.
     d_top = float(f"{d_max * (1 + 1e-6):.7g}")
@@ -92,8 +108,25 @@ def table_for(
     if align_nodes and not warp:
         lo, hi, n_bins = aligned_nodes(rng, tf, n_bins)
         rng = (lo, hi)
-    return _cached(tf, rng, d_top, n_bins=n_bins, n_slices=n_slices,
-                   log_base=float(log_base), encoding=encoding, dtype=dtype, optics=optics, warp=bool(warp))
+    key = (tf, rng, d_top, n_bins, n_slices, float(log_base), encoding, dtype, optics, bool(warp))
+    with _cache_lock:
+        table = _cache.get(key)
+        if table is not None:
+            _cache.move_to_end(key)
+            return table
+    table = build_table(tf, rng, d_top, n_bins=n_bins, n_slices=n_slices, log_base=float(log_base),
+                        encoding=encoding, dtype=dtype, optics=optics, warp=bool(warp), runs=runs)
+    with _cache_lock:
+        _cache[key] = table
+        while len(_cache) > _CACHE_SIZE:
+            _cache.popitem(last=False)
+    return table
+
+
+def cache_clear() -> None:
+    """Forget the tables :func:`table_for` keeps (for timing their build)."""
+    with _cache_lock:
+        _cache.clear()
 
 
 def build_table(
@@ -108,6 +141,7 @@ def build_table(
     dtype: str = "float32",
     optics: str = "exact",
     warp: bool = False,
+    runs: TableRunsBuilder | None = None,
 ) -> PreintegrationTable:
     """Build a pre-integration table (no cache; see :func:`table_for`).
 
@@ -126,6 +160,9 @@ def build_table(
     warp : place the ``n_bins`` nodes where the transfer function varies, control points on nodes
         (:func:`tetvr.optics.tablewarp.warped_nodes`; at most :func:`~tetvr.optics.tablewarp.max_warped_nodes`),
         instead of evenly; the table's ``nodes`` then says where they are.
+    runs : builds the off-diagonal entries of a "normalized" float32 table with even nodes
+        and ``optics`` other than "vtk" (:class:`TableRunsBuilder`: the GPU's
+        :class:`tetvr.gl.tablebuild.TableRuns`); None, or any other table: numpy.
 
     A node on a step of the transfer function (:func:`~tetvr.optics.table.node_limits`) ends the bin
     below it with the step's lower side and starts the bin above with its upper side, so bands of
@@ -145,9 +182,6 @@ def build_table(
     tau_node, tau_bin = _extinction(opacity, u, optics, ends[2:])
     thick = _slice_thicknesses(d_max, log_base, n_slices)
 
-    # Built as [k, sf, sb] (each step of the run recurrence writes one contiguous row) and
-    # stored as [k, sb, sf]; theta and alpha are symmetric in (sf, sb).
-    rgb = np.zeros((n_slices, n_bins, n_bins, 3))
     # Optical depth is exact from the prefix sum of the bin means (Engel 2001).
     # Scalars in units of the first bin's width (all bins' when the nodes are even).
     prefix = np.concatenate([[0.0], np.cumsum(tau_bin * width)])  # optical depth over bins < i
@@ -157,6 +191,25 @@ def build_table(
     # [sb, sf], symmetric: the mean over the bins between, or the node's own on the diagonal.
     mean_tau = np.where(span > 0, np.abs(prefix[None, :] - prefix[:, None]) / np.where(span > 0, span, 1),
                         tau_node[None, :])
+    if runs is not None and warped is None and optics != "vtk" and encoding == "normalized" and dtype == "float32":
+        data, alpha_scale = _built_elsewhere(runs, color, ends, tau_node, tau_bin, prefix, mean_tau, thick), 1.0
+    else:
+        data, alpha_scale = _built_here(color, ends, tau_node, tau_bin, width, prefix, mean_tau, thick, warped is None,
+                                        encoding, dtype, optics)
+    steps = _step_corners(data, ends, u, optics, thick, encoding, alpha_scale) if stepped and warped is None else None
+    return _finished(data, tf, lo, hi, thick, log_base, encoding, alpha_scale, warped, optics, steps)
+
+
+def _built_here(color: NDArray[np.float64], ends: tuple[NDArray[np.float64], ...], tau_node: NDArray[np.float64],
+                tau_bin: NDArray[np.float64], width: NDArray[np.float64], prefix: NDArray[np.float64],
+                mean_tau: NDArray[np.float64], thick: NDArray[np.float64], even: bool, encoding: str, dtype: str,
+                optics: str) -> tuple[NDArray[np.generic], float]:
+    """:func:`build_table`'s data, built by numpy, and the factor its stored A was divided by (:func:`_encoded`)."""
+    n_bins = color.shape[0]
+    i_idx = np.arange(n_bins)
+    # Built as [k, sf, sb] (each step of the run recurrence writes one contiguous row) and
+    # stored as [k, sb, sf]; theta and alpha are symmetric in (sf, sb).
+    rgb = np.zeros((thick.size, n_bins, n_bins, 3))
     mean_color: NDArray[np.float64] | None = None
     if optics == "vtk":  # VTK's PT: the mean of the two ends, not of the segment
         mean_tau = 0.5 * (tau_node[None, :] + tau_node[:, None])
@@ -166,16 +219,14 @@ def build_table(
         # Diagonal: constant scalar, closed form.
         rgb[:, i_idx, i_idx, :] = color[None] * (-np.expm1(-thick[:, None] * tau_node[None]))[..., None]
         # Off-diagonal: the incremental recurrence, forwards (sb > sf) and on the mirrored axis.
-        if warped is None:
+        if even:
             _fill_runs(rgb, ends[:2], tau_bin, thick)
         else:
             _fill_runs_uneven(rgb, ends[:2], tau_bin, width, thick)
     # Slice 0's colour in a "normalized" table: the thin limit, or VTK's mean of the end colours.
     thin = None if encoding == "premultiplied" else mean_color if mean_color is not None else _thin_limit(
         color, ends[:2], tau_bin * width, tau_node, prefix)
-    data, alpha_scale = _encoded(rgb, mean_tau, thin, thick, encoding, dtype, optics)
-    steps = _step_corners(data, ends, u, optics, thick, encoding, alpha_scale) if stepped and warped is None else None
-    return _finished(data, tf, lo, hi, thick, log_base, encoding, alpha_scale, warped, optics, steps)
+    return _encoded(rgb, mean_tau, thin, thick, encoding, dtype, optics)
 
 
 def _checked(tf: TransferFunction, scalar_range: tuple[float, float], d_max: float, n_bins: int, n_slices: int,
@@ -352,8 +403,29 @@ def _finished(data: NDArray[np.generic], tf: TransferFunction, lo: float, hi: fl
                                extinction=optical, steps=steps)
 
 
-# table_for's cache (called with keywords, so every call shares one key layout).
-_cached = functools.lru_cache(maxsize=32)(build_table)
+# table_for's cache: the last _CACHE_SIZE tables, by their inputs.
+_CACHE_SIZE = 32
+_cache: "collections.OrderedDict[tuple[Any, ...], PreintegrationTable]" = collections.OrderedDict()
+_cache_lock = threading.Lock()
+
+
+def _built_elsewhere(runs: TableRunsBuilder, color: NDArray[np.float64], ends: tuple[NDArray[np.float64], ...],
+                     tau_node: NDArray[np.float64], tau_bin: NDArray[np.float64], prefix: NDArray[np.float64],
+                     mean_tau: NDArray[np.float64], thick: NDArray[np.float64]) -> NDArray[np.float32]:
+    """A "normalized" float32 table's data, its off-diagonal entries from ``runs`` and the
+    rest as :func:`_encoded` writes it: slice 0 the thin limit, and on the diagonal (a
+    constant scalar) the node's colour and extinction. Built in the texture's layout
+    [back, front, slice] and returned as a view [slice, back, front]."""
+    n_bins = color.shape[0]
+    texels = np.empty((n_bins, n_bins, thick.size + 1, 4), dtype=np.float32)
+    runs(ends[0], ends[1], tau_bin, prefix, thick, texels)
+    texels[:, :, 0, :3] = _thin_limit(color, ends[:2], tau_bin, tau_node, prefix)
+    texels[:, :, 0, 3] = np.minimum(mean_tau, _MAX_STORED_TAU)
+    i = np.arange(n_bins)
+    alpha = -np.expm1(-tau_node[:, None] * thick[None])  # [node, k]
+    texels[i, i, 1:, :3] = np.clip(np.where(alpha[..., None] > 1e-300, color[:, None], 0.0), 0.0, 1.0)
+    texels[i, i, 1:, 3] = np.minimum(tau_node, _MAX_STORED_TAU)[:, None]
+    return np.moveaxis(texels, 2, 0)
 
 
 def _fill_runs(rgb: NDArray[np.float64], ends: tuple[NDArray[np.float64], ...], tau_bin: NDArray[np.float64],
