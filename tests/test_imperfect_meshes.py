@@ -149,6 +149,20 @@ def test_copies_with_other_values_are_overlaps():
     _assert_refused(mesh)
 
 
+def test_each_folded_face_is_counted_once():
+    """Two tets on the same side of the face they share: one folded face (it was counted once
+    and then halved, so that a single fold read as none)."""
+    from tetvr.mesh.records import folded_faces
+
+    tets = np.array([[0, 1, 2, 3], [0, 1, 2, 4]])
+    folded = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.2, 0.2, 0.5]], dtype=float)
+    assert folded_faces(TetMesh.from_arrays(folded, tets, np.arange(5.0))) == 1
+    unfolded = folded.copy()
+    unfolded[4, 2] = -0.5  # the first tet above the face, the second below it
+    assert folded_faces(TetMesh.from_arrays(unfolded, tets, np.arange(5.0))) == 0
+    assert folded_faces(synthetic.cube(3, field)) == 0
+
+
 # ---- overlapping cells: projected tetrahedra, with a warning; raymarch refuses ----
 
 def _assert_refused(mesh: TetMesh) -> None:

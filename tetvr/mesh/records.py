@@ -324,17 +324,19 @@ def folded_faces(mesh: TetMesh) -> int:
     if cached is not None and cached[0]() is adj:
         return cached[1]
     mates = adj.mates.reshape(-1)
-    folded = 0
+    mirrored = adj.mirrored.reshape(-1)
+    n = 0
     for rows in blocks(mesh.n_tets):
+        # Each interior face once, where its plane is its own tet's (the copy across it
+        # takes that plane negated, which the far vertex of its mate always lies ahead of).
         slots = np.arange(4 * rows.start, 4 * rows.stop)
-        slots = slots[mates[slots] >= 0]
+        slots = slots[(mates[slots] >= 0) & ~mirrored[slots]]
         mate = mates[slots]
         other = mesh.points[mesh.tets[mate // 4, mate % 4]] - adj.origin  # the mate's vertex off the face
         normals, offsets = adj.planes(slots)
         side = np.einsum("ij,ij->i", normals, other) - offsets
         # Outward from the slot's tet, so the mate's far vertex must be ahead of the plane; allow rounding.
-        folded += int(np.count_nonzero(side <= -1e-12 * adj.radius))
-    n = folded // 2
+        n += int(np.count_nonzero(side <= -1e-12 * adj.radius))
     _FOLDS.clear()
     _FOLDS[id(adj)] = (weakref.ref(adj), n)
     return n
