@@ -208,6 +208,27 @@ def test_records_built_beside_the_table_are_taken_or_dropped():
         assert r._marcher is not None and r._marcher._prefetch is None and r._marcher._records is None
 
 
+def test_records_put_on_the_gl_before_the_walk_check_ends_go_if_it_fails(monkeypatch):
+    """The records go to the GL while the rest of the walk check runs; where that check then
+    finds parts that overlap (so "auto" takes projected tetrahedra), they are released."""
+    import warnings
+
+    from tetvr.gl.raymarch import Marcher
+    from tetvr.scene.imperfect import embedded_block
+
+    uploads = []
+    use_mesh = Marcher._use_mesh
+    monkeypatch.setattr(Marcher, "_use_mesh", lambda self, m: uploads.append(m) or use_mesh(self, m))
+    mesh = embedded_block()
+    with tetvr.Renderer(RenderSettings()) as r:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "parts of the mesh overlap": projected tetrahedra
+            r.render(mesh, Camera.fit(mesh), _tf(mesh), size=(24, 24))
+        assert r._marcher is not None and r._marcher._records is None and not r._marcher._textures
+        assert r._marcher._prefetch is None and r._marcher._unused is None
+    assert uploads == [mesh]  # they were put on the GL
+
+
 def test_records_go_to_the_gl_in_blocks_and_leave_the_host(monkeypatch):
     """The per-tet records are built and written a block of tets at a time (here three
     blocks of 4096, the last part of a row): the same image as from one block. Once they

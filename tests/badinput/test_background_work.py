@@ -16,7 +16,7 @@ import tetvr
 import tetvr.gl.renderer as renderer_module
 import tetvr.order.method as method_module
 from tetvr import Camera, RenderSettings
-from tetvr.gl import raymarch
+from tetvr.gl import prefetch, raymarch
 from tetvr.mesh import synthetic
 from tetvr.render import default_transfer_function
 
@@ -29,7 +29,7 @@ def test_no_records_are_built_for_a_mesh_auto_sends_to_projected_tetrahedra(monk
     monkeypatch.setattr(renderer_module, "march_fits", too_large)
     monkeypatch.setattr(method_module, "march_fits", too_large)
     started = []
-    monkeypatch.setattr(raymarch, "_prefetch", lambda m: started.append(m))
+    monkeypatch.setattr(raymarch, "Prefetch", lambda m: started.append(m))
     with tetvr.Renderer(RenderSettings()) as r:
         r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(16, 16))
     assert started == []
@@ -37,13 +37,13 @@ def test_no_records_are_built_for_a_mesh_auto_sends_to_projected_tetrahedra(monk
 
 def test_the_records_are_built_in_a_daemon_thread(monkeypatch):
     seen = []
-    build = raymarch._records
+    build = prefetch.records
 
     def records(mesh):
         seen.append(threading.current_thread())
         return build(mesh)
 
-    monkeypatch.setattr(raymarch, "_records", records)
+    monkeypatch.setattr(prefetch, "records", records)
     mesh = synthetic.cube(3)
     with tetvr.Renderer(RenderSettings()) as r:
         r.render(mesh, Camera.fit(mesh), default_transfer_function(mesh), size=(16, 16))

@@ -33,8 +33,6 @@ layer and neither.
 from __future__ import annotations
 
 import dataclasses
-import threading
-from concurrent.futures import Future
 from typing import Any
 
 import numpy as np
@@ -45,11 +43,10 @@ from tetvr.core.image import release_free_memory
 from tetvr.gl.march_layout import (COPIES_IMAGE, COUNT_IMAGE, LIST_IMAGE, LIST_LENGTH, LIST_MAX_BYTES, MORE_BUFFER, NEAREST,
                                    SUSPECT_BUFFER, SUSPECT_LENGTH, OVERFLOW_BUFFER, POINTS_IMAGE, Layout, Rim,
                                    raymarch_capacity, records_textures, rect_triangles, texture)
-from tetvr.mesh.records import MarchRecords, march_records, near_plane_cells, rim_faces
-from tetvr.mesh.copies import DistinctCells, distinct_cells
-from tetvr.mesh.locality import spatially_ordered
-from tetvr.order.walkable import walk_check
+from tetvr.mesh.records import MarchRecords, near_plane_cells, rim_faces
+from tetvr.gl.prefetch import Prefetch, records
 from tetvr.mesh.tetmesh import TetMesh
+from tetvr.mesh.adjacency import face_adjacency
 from tetvr.gl.host import ProgramHost
 
 __all__ = ["Marcher", "MarchStats", "raymarch_capacity"]
@@ -65,33 +62,8 @@ MAX_LAYERS = 64
 OPAQUE_REMAINDER = 2.0**-20
 
 
-#: One background thread builds a new mesh's face adjacency and records while the
-#: renderer builds the frame's table (both numpy, which lets go of the GIL in its loops):
-#: the first frame overlaps the two instead of adding them.
-#: The thread is a daemon, so that an interpreter leaving (Ctrl-C in a script) does not wait
-#: for a build it no longer needs; one build runs at a time.
-_BUILD_LOCK = threading.Lock()
-
-
 #: OpenGL's GL_DEPTH_CLAMP (moderngl names no flag for it).
 GL_DEPTH_CLAMP = 0x864F
-
-
-def _prefetch(mesh: TetMesh) -> Future[tuple[DistinctCells, MarchRecords]]:
-    """:func:`_records` of ``mesh``, built in a daemon thread."""
-    future: Future[tuple[DistinctCells, MarchRecords]] = Future()
-
-    def build() -> None:
-        if not future.set_running_or_notify_cancel():
-            return
-        try:
-            with _BUILD_LOCK:
-                future.set_result(_records(mesh))
-        except BaseException as exc:  # handed to whoever takes the records
-            future.set_exception(exc)
-
-    threading.Thread(target=build, name="tetvr-records", daemon=True).start()
-    return future
 
 
 def _slack(mesh: TetMesh, camera: Camera) -> float:
@@ -100,15 +72,6 @@ def _slack(mesh: TetMesh, camera: Camera) -> float:
     lo, hi = mesh.bounds
     far = float(np.linalg.norm(np.asarray(camera.position, dtype=np.float64) - (lo + hi) / 2))
     return 1e-4 * float(np.linalg.norm(hi - lo)) + 1e-5 * far
-
-
-def _records(mesh: TetMesh) -> tuple[DistinctCells, MarchRecords]:
-    """The mesh the walk goes through (its points along a space-filling curve,
-    :mod:`tetvr.mesh.locality`; each repeated cell once, :mod:`tetvr.mesh.copies`) and its records; and what :func:`~tetvr.order.method.choose` checks of the mesh
-    (:func:`~tetvr.order.walkable.walk_check`), all cached with the mesh."""
-    walk_check(mesh)
-    distinct = distinct_cells(spatially_ordered(mesh))
-    return distinct, march_records(distinct.mesh, cells=False)  # the per-tet records go to the GL in blocks
 
 
 @dataclasses.dataclass(frozen=True)
@@ -151,7 +114,8 @@ class Marcher:
         self._counters: list[Any] = []  # the overflow and more counters (LIST)
         self._suspects: Any = None  # the frame's check of itself (march.frag, SUSPECT_BUFFER)
         self.frames = 0  # frames drawn: a caller tells whether last_stats is its frame's
-        self._prefetch: tuple[TetMesh, Future[tuple[DistinctCells, MarchRecords]]] | None = None
+        self._prefetch: Prefetch | None = None
+        self._unused: TetMesh | None = None  # a mesh whose records settle() put on the GL before a frame used them
         self._shifts: dict[str, int] = {}
         self._points: NDArray[np.float32] = np.zeros((0, 4), dtype=np.float32)
         self._points_eye: NDArray[np.float64] | None = None
@@ -171,7 +135,7 @@ class Marcher:
         self._suspects = None
         self._targets.clear()
         self._query = None
-        self._mesh = self._walked = self._records = None
+        self._mesh = self._walked = self._records = self._unused = None
         self._prefetch = None
 
     def gpu_bytes(self) -> int:
@@ -186,18 +150,46 @@ class Marcher:
 
     # ---- per mesh ----
     def prefetch(self, mesh: TetMesh) -> None:
-        """Start building ``mesh``'s records in the background (unless held or under way)."""
-        if (mesh is self._mesh and self._records is not None) or (self._prefetch and self._prefetch[0] is mesh):
+        """Start building ``mesh``'s records and walk check in the background (unless held or under way)."""
+        if (mesh is self._mesh and self._records is not None) or (self._prefetch and self._prefetch.mesh is mesh):
             return
-        self._prefetch = (mesh, _prefetch(mesh))
+        self._prefetch = Prefetch(mesh)
 
-    def settle(self, mesh: TetMesh, keep: bool) -> None:
-        """Wait for a prefetch of ``mesh`` (its face adjacency is then cached), and drop it
-        unless ``keep`` (the mesh goes to projected tetrahedra)."""
-        if self._prefetch is not None and self._prefetch[0] is mesh:
-            self._prefetch[1].exception()  # waits; an error is raised where the records are taken
-            if not keep:
-                self._prefetch = None
+    def settle(self, mesh: TetMesh, keep: bool, upload: bool = False) -> None:
+        """Wait for a prefetch of ``mesh`` (its walk check is then cached), and drop it
+        unless ``keep`` (the mesh goes to projected tetrahedra), with the records it put on
+        the GL. ``upload``: put the records on the GL as soon as they are built, while the
+        walk check finishes, where its first findings leave the walk possible."""
+        pending = self._prefetch
+        if pending is None or pending.mesh is not mesh:
+            return
+        if upload and pending.records.exception() is None:  # waits for the records
+            walked = pending.records.result()[0].mesh
+            capacity = raymarch_capacity(int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384)))
+            if (max(walked.n_tets, walked.n_points) <= capacity and not pending.records.result()[0].n_conflicting
+                    and not face_adjacency(walked).n_nonmanifold_faces):
+                self._use_mesh(mesh)
+                self._unused = mesh
+        pending.check.exception()  # waits; an error is raised where the check is taken
+        if self._mesh is mesh:
+            self._prefetch = None  # taken
+        if not keep:
+            self._prefetch = None
+            self.drop_unused(mesh)
+
+    def drop_unused(self, mesh: TetMesh) -> None:
+        """Release ``mesh``'s records if :meth:`settle` put them on the GL and no frame used them."""
+        if self._unused is mesh and self._mesh is mesh:
+            self._drop_mesh()
+        self._unused = None
+
+    def _drop_mesh(self) -> None:
+        """Release the records on the GL."""
+        for obj in [*self._vaos.values(), *self._textures.values(), *self._faces]:
+            obj.release()
+        self._vaos.clear()
+        self._textures, self._faces = {}, []
+        self._mesh = self._walked = self._records = None
 
     def _use_mesh(self, mesh: TetMesh) -> tuple[TetMesh, MarchRecords]:
         """The mesh the walk goes through (``mesh`` with each repeated cell once) and its
@@ -205,11 +197,15 @@ class Marcher:
         if mesh is self._mesh and self._records is not None:
             assert self._walked is not None
             return self._walked, self._records
-        for obj in [*self._vaos.values(), *self._textures.values(), *self._faces]:
-            obj.release()
-        self._vaos.clear()
-        pending, self._prefetch = self._prefetch, None
-        distinct, rec = pending[1].result() if pending is not None and pending[0] is mesh else _records(mesh)
+        self._drop_mesh()
+        pending = self._prefetch
+        if pending is not None and pending.mesh is mesh:
+            distinct, rec = pending.records.result()
+            if pending.check.done():
+                self._prefetch = None
+        else:
+            self._prefetch = None
+            distinct, rec = records(mesh)
         release_free_memory()  # the walk check's temporaries, before the textures take their place
         given, mesh = mesh, distinct.mesh
         max_tex = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
@@ -272,12 +268,14 @@ class Marcher:
                ) -> NDArray[np.float32]:
         """Premultiplied RGBA, (height, width, 4), row 0 at the top; ``window`` a
         :class:`~tetvr.gl.surfaces.RayWindow` (clip planes, ray limit) or None."""
+        self._unused = None
         return self._frame(mesh, camera, size, uniforms, table_uniforms, dict(defines, EXTENT=0), clock, window)
 
     def extent(self, mesh: TetMesh, camera: Camera, size: tuple[int, int], uniforms: dict[str, Any],
                clock: Any) -> NDArray[np.float32]:
         """Per pixel (first entry depth, last exit depth, segments walked, 0); (3e38, -3e38)
         where no ray enters the mesh."""
+        self._unused = None
         defines = dict(TABLE_NORMALIZED=1, TABLE_CUBIC=0, EXTENT=1)
         return self._frame(mesh, camera, size, uniforms, {}, defines, clock)
 

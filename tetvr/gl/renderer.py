@@ -473,10 +473,13 @@ class Renderer(GLOwner):
         :func:`tetvr.order.method.choose` says, unless the records would not fit one texture of
         this GL (then projected tetrahedra, which draw in chunks)."""
         if self._marcher is not None:
-            self._marcher.settle(mesh, keep=True)  # the adjacency choose() reads, built in the background
+            # The walk check choose() reads (and, meanwhile, the records on the GL: tetvr.gl.raymarch).
+            upload = choose(self.settings) == "raymarch"
+            self._marcher.settle(mesh, keep=upload, upload=upload)
         if choose(self.settings, mesh, camera, size) != "raymarch":
             if self._marcher is not None:
                 self._marcher.settle(mesh, keep=False)
+                self._marcher.drop_unused(mesh)
             return False
         fits = mesh.n_tets <= raymarch_capacity(int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384)))
         if not fits and self.settings.method == "raymarch":
