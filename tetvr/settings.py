@@ -61,10 +61,10 @@ class RenderSettings:
         changes along thick opaque segments (``bench/speed_accuracy.py``).
     table_tolerance : the RMS per-segment error (premultiplied RGBA) an ``"auto"`` table
         size aims for; the cheapest table estimated within it is used (if none is, the
-        most accurate auto size; with ``table_warp="auto"`` a warped one). The default 2e-5
-        (an 8-bit step is 3.9e-3) leaves a margin for the errors of the segments along a ray
-        adding up (:mod:`tetvr.optics.tablesize`); it is not met on CFD meshes with spiky
-        transfer functions (see ``table_warp``).
+        most accurate auto size; with ``table_warp="auto"`` a warped one), within a margin
+        of 2.5 below it where one is (the errors of the segments along a ray add up:
+        :mod:`tetvr.optics.tablesize`). The default 5e-5 (an 8-bit step is 3.9e-3) is not
+        met on CFD meshes with spiky transfer functions (see ``table_warp``).
     table_align_nodes : place the table's scalar nodes so that the transfer function's
         control points, the sharpest kinks first, fall on nodes
         (:func:`tetvr.optics.table.aligned_scalar_range`; default ``True``), rather than

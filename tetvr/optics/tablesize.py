@@ -48,19 +48,24 @@ tolerance:
    steps evenly, so all are slices of that one fine table.
 4. The estimate is the weighted RMS over the segments, both axes combined in quadrature.
    The cheapest table (N*N*(K+1) entries, which sets build time and memory) whose estimate
-   is within ``tolerance`` wins; if none is, the most accurate (ties within 10 % go to the
-   cheaper). Tables above :data:`MAX_AUTO_ENTRIES` are not considered.
+   is within ``tolerance`` (within ``tolerance / COMPOSITING_MARGIN`` where one is, below)
+   wins; if none is, the most accurate (ties within 10 % go to the cheaper). Tables above :data:`MAX_AUTO_ENTRIES` are not considered.
 
 The estimates follow the true per-segment error of each table closely (within 5x,
 ``tests/test_tablesize.py``), but the image composites many segments along a ray, and where
 their errors share a sign they add up: on the SimVascular beam (long thin cells seen along
 their length) the 256-bin table was estimated at 2.1e-5 (its true error on the same segments
 1.9e-5) and the image's RMSE was 3.6e-5 (88.8 dB at 512x512); on the benchmark's grids the
-image's RMSE is below the estimate (background, fewer cells per ray). The default tolerance
-2e-5 (an 8-bit step is 3.9e-3) keeps that margin: the beam gets 512 bins (111 dB), and the
-grids, the CFD meshes, the pipe and the fTetWild torus of ``bench/vs_vtk.py`` the tables they
-got at 5e-5. Spiky transfer functions are not met within :data:`MAX_AUTO_ENTRIES` and get the
-most accurate table there (with ``table_warp="auto"``, a warped one). The decision costs ~0.02 s per transfer function, a third of a 256-bin
+image's RMSE is below the estimate (background, fewer cells per ray). So the cheapest table
+within ``tolerance / COMPOSITING_MARGIN`` (2e-5 at the default tolerance 5e-5; an 8-bit step
+is 3.9e-3) is taken where one of the kind chosen (even or warped nodes: warped only where no
+even table meets the tolerance itself) is, else the cheapest within the tolerance: the beam
+gets 512 bins (111 dB); the grids, CFD meshes, pipe and fTetWild torus of
+``bench/vs_vtk.py`` keep the tables they got without the margin; a discretized map whose even
+tables meet the tolerance but not the margin keeps its even, stepped table (a warped one
+cannot cut segments at the steps). Spiky transfer functions are not met within
+:data:`MAX_AUTO_ENTRIES` and get the most accurate table there (with ``table_warp="auto"``, a
+warped one). The decision costs ~0.02 s per transfer function, a third of a 256-bin
 table's build. The thickness axis of an "auto" table spans d_max / span .. d_max with the
 span the optical depth of the thickest segment at the largest extinction, at least 8
 (:func:`auto_span`: below optical depth 1 the linear ramp to zero thickness is accurate);
@@ -86,7 +91,8 @@ from tetvr.optics.tablewarp import warped_nodes
 from tetvr.optics.transfer import TransferFunction
 
 __all__ = ["SegmentSample", "TableSize", "sample_segments", "scalar_axis_error", "thickness_axis_error",
-           "choose_table_size", "auto_span", "cache_clear", "AUTO_BINS", "AUTO_SLICES", "DEFAULT_TOLERANCE", "MAX_AUTO_ENTRIES"]
+           "choose_table_size", "auto_span", "cache_clear", "AUTO_BINS", "AUTO_SLICES", "DEFAULT_TOLERANCE", "MAX_AUTO_ENTRIES",
+           "COMPOSITING_MARGIN"]
 
 #: Candidate scalar bins of an "auto" table. Below 256 the build is already cheap
 #: (0.06 s) and the frame no faster; above 512 the build takes seconds (1024: 3 s) and 150 MiB+.
@@ -100,7 +106,7 @@ WARP_COST_DIVISOR = 8
 #: Candidate thickness slices: K - 1 divides _FINE_STEPS, so each is a subset of one table.
 AUTO_SLICES = (8, 15, 22, 29, 43)
 #: RMS per-segment error the "auto" size aims for (premultiplied RGBA, 1 = full intensity).
-DEFAULT_TOLERANCE = 2e-5
+DEFAULT_TOLERANCE = 5e-5
 #: Log-thickness steps of the fine comparison table, and its scalar bins.
 _FINE_STEPS = 84
 _FINE_BINS = 16
@@ -121,6 +127,11 @@ _N_SEGMENTS = 4096
 MAX_AUTO_ENTRIES = 256 * 256 * 44
 #: Ties in the estimate (relative) go to the cheaper table when none meets the tolerance.
 _TIE = 0.1
+#: "auto" takes the cheapest table estimated within tolerance / COMPOSITING_MARGIN where one
+#: of the kind it chose (even or warped) is, else the cheapest within the tolerance: a ray
+#: composites many segments, and where their errors share a sign the image's error exceeds
+#: the per-segment estimate (the module notes: the SimVascular beam).
+COMPOSITING_MARGIN = 2.5
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -347,7 +358,10 @@ def _choose(tf: TransferFunction, sample: SegmentSample, data_range: tuple[float
         options = [o for o in options if o.warp != even_ok]
     good = [o for o in options if o.error <= tolerance]
     if good:
-        return min(good, key=lambda o: (cost[o], o.error))
+        # Within the margin where a table of the kind chosen above is (the image adds up
+        # the errors of the segments along a ray), else within the tolerance.
+        margin = [o for o in good if o.error <= tolerance / COMPOSITING_MARGIN]
+        return min(margin or good, key=lambda o: (cost[o], o.error))
     best = min(o.error for o in options)
     if not math.isfinite(best):  # NaN compares false: nothing would be within any tie of it
         raise ValueError(f"the table-size estimates are not finite ({[o.error for o in options]}) for a transfer "
