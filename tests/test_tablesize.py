@@ -95,29 +95,30 @@ def test_choices_follow_what_limits_the_scene():
     assert sizes["smooth"].error <= RenderSettings().table_tolerance
 
 
-def test_a_tighter_tolerance_never_buys_a_smaller_table():
-    mesh, tf = thick_scene()
+@pytest.mark.parametrize("scene", [smooth_scene, thick_scene], ids=["smooth", "thick"])
+def test_a_tighter_tolerance_never_buys_a_smaller_table(scene):
+    mesh, tf = scene()
     cost = [(s.n_bins ** 2 * (s.n_slices + 1), s.error) for s in
-            (choose_table_size(tf, mesh, tolerance=t) for t in (1e-2, 1e-3, 1e-4, 5e-5, 1e-6))]
+            (choose_table_size(tf, mesh, tolerance=t) for t in np.geomspace(1e-2, 1e-6, 25))]
     assert [c for c, _ in cost] == sorted(c for c, _ in cost)
     assert cost[0][0] < cost[-1][0] and cost[-1][1] < cost[0][1]
 
 
-def test_the_cheapest_table_within_the_margin_where_one_of_its_kind_is():
-    """Within tolerance / COMPOSITING_MARGIN where a table of the kind chosen (even here) is,
-    else the cheapest within the tolerance: a margin never changes the kind."""
+@pytest.mark.parametrize("scene", [smooth_scene, thick_scene], ids=["smooth", "thick"])
+def test_the_cheapest_table_within_the_margin_else_the_most_accurate(scene):
+    """Within tolerance / COMPOSITING_MARGIN where an auto table is, else (one within the
+    tolerance) the most accurate, ties within 10 % to the cheaper: never a warped one here."""
     from tetvr.optics.tablesize import COMPOSITING_MARGIN
 
-    mesh, tf = smooth_scene()
-    even = {(n, k): choose_table_size(tf, mesh, n_bins=n, n_slices=k) for n in AUTO_BINS for k in AUTO_SLICES}
-    for tol in (1e-3, 1e-4, 5e-5, 2e-5, 1e-5):
+    mesh, tf = scene()
+    best = choose_table_size(tf, mesh, tolerance=1e-12)  # none within: the most accurate
+    for tol in np.geomspace(1e-3, 1e-6, 13):
         got = choose_table_size(tf, mesh, tolerance=tol)
         assert not got.warp
-        within = [s for s in even.values() if s.error <= tol / COMPOSITING_MARGIN] or \
-                 [s for s in even.values() if s.error <= tol]
-        if within:
-            cheapest = min(s.n_bins ** 2 * (s.n_slices + 1) for s in within)
-            assert got.n_bins ** 2 * (got.n_slices + 1) == cheapest, (tol, got)
+        if best.error <= tol / COMPOSITING_MARGIN:
+            assert got.error <= tol / COMPOSITING_MARGIN, (tol, got)
+        elif best.error <= tol:
+            assert got.error <= best.error * 1.1, (tol, got, best)
 
 
 def test_the_margin_gives_the_beam_the_bins_its_image_needs():

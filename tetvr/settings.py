@@ -62,8 +62,8 @@ class RenderSettings:
     table_tolerance : the RMS per-segment error (premultiplied RGBA) an ``"auto"`` table
         size aims for; the cheapest table estimated within it is used (if none is, the
         most accurate auto size; with ``table_warp="auto"`` a warped one), within a margin
-        of 2.5 below it where one is (the errors of the segments along a ray add up:
-        :mod:`tetvr.optics.tablesize`). The default 5e-5 (an 8-bit step is 3.9e-3) is not
+        of 2.5 below it where one is, else the most accurate within it (the errors of the
+        segments along a ray add up: :mod:`tetvr.optics.tablesize`). The default 5e-5 (an 8-bit step is 3.9e-3) is not
         met on CFD meshes with spiky transfer functions (see ``table_warp``).
     table_align_nodes : place the table's scalar nodes so that the transfer function's
         control points, the sharpest kinks first, fall on nodes

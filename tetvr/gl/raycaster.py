@@ -37,6 +37,7 @@ from tetvr.optics.transfer import TransferFunction
 from tetvr.volume.volume import Volume
 from tetvr.gl.context import context_alive, create_context, describe
 from tetvr.gl.shaders import ShaderCompileError, assemble, explain
+from tetvr.gl.tablebuild import TableRuns
 from tetvr.gl.util import (_LLVMPIPE_TEXTURE_BYTES, _SOFTWARE_GL, Clock, GLOwner, check_size, clear_gl_errors,
                    free_video_memory, gl_locked, locked, make_target, set_uniforms, table_texture, tf_points_texture)
 
@@ -265,9 +266,21 @@ class Raycaster(GLOwner):
         if key != self._table_checked:  # checked once: a built (cached) table needs no memory again
             self._check_table(n_bins, s.table_thickness_slices)
         table = table_for(tf, volume.scalar_range, step, n_bins=n_bins, n_slices=s.table_thickness_slices,
-                          log_base=2.0, encoding="normalized", dtype="float32", align_nodes=True)
+                          log_base=2.0, encoding="normalized", dtype="float32", align_nodes=True,
+                          runs=TableRuns(self.ctx, self._runs_program))
         self._table_checked = key
         return table
+
+    def _runs_program(self) -> Any:
+        """The compiled ``table_runs.comp`` (the table's runs on the GPU: :mod:`tetvr.gl.tablebuild`)."""
+        prog = self._programs.get(("table_runs",))
+        if prog is None:
+            src, files = assemble("table_runs.comp")
+            try:
+                prog = self._programs[("table_runs",)] = self.ctx.compute_shader(src)
+            except Exception as exc:
+                raise ShaderCompileError(f"table_runs.comp: {explain(exc, files)}") from exc
+        return prog
 
     def _check_table(self, n_bins: int, n_slices: int) -> None:
         """Refuse a table this GL cannot hold, or this machine cannot build, before any

@@ -48,8 +48,9 @@ tolerance:
    steps evenly, so all are slices of that one fine table.
 4. The estimate is the weighted RMS over the segments, both axes combined in quadrature.
    The cheapest table (N*N*(K+1) entries, which sets build time and memory) whose estimate
-   is within ``tolerance`` (within ``tolerance / COMPOSITING_MARGIN`` where one is, below)
-   wins; if none is, the most accurate (ties within 10 % go to the cheaper). Tables above :data:`MAX_AUTO_ENTRIES` are not considered.
+   is within ``tolerance / COMPOSITING_MARGIN`` wins (below); if none is, the most accurate
+   within ``tolerance``; if none is, the most accurate (in both, ties within 10 % go to the
+   cheaper). Tables above :data:`MAX_AUTO_ENTRIES` are not considered.
 
 The estimates follow the true per-segment error of each table closely (within 5x,
 ``tests/test_tablesize.py``), but the image composites many segments along a ray, and where
@@ -59,10 +60,10 @@ their length) the 256-bin table was estimated at 2.1e-5 (its true error on the s
 image's RMSE is below the estimate (background, fewer cells per ray). So the cheapest table
 within ``tolerance / COMPOSITING_MARGIN`` (2e-5 at the default tolerance 5e-5; an 8-bit step
 is 3.9e-3) is taken where one of the kind chosen (even or warped nodes: warped only where no
-even table meets the tolerance itself) is, else the cheapest within the tolerance: the beam
-gets 512 bins (111 dB); the grids, CFD meshes, pipe and fTetWild torus of
+even table meets the tolerance itself) is, else the most accurate within the tolerance: the
+beam gets 512 bins (111 dB); the grids, CFD meshes, pipe and fTetWild torus of
 ``bench/vs_vtk.py`` keep the tables they got without the margin; a discretized map whose even
-tables meet the tolerance but not the margin keeps its even, stepped table (a warped one
+tables meet the tolerance but not the margin keeps an even, stepped table (a warped one
 cannot cut segments at the steps). Spiky transfer functions are not met within
 :data:`MAX_AUTO_ENTRIES` and get the most accurate table there (with ``table_warp="auto"``, a
 warped one). The decision costs ~0.02 s per transfer function, a third of a 256-bin
@@ -128,7 +129,7 @@ MAX_AUTO_ENTRIES = 256 * 256 * 44
 #: Ties in the estimate (relative) go to the cheaper table when none meets the tolerance.
 _TIE = 0.1
 #: "auto" takes the cheapest table estimated within tolerance / COMPOSITING_MARGIN where one
-#: of the kind it chose (even or warped) is, else the cheapest within the tolerance: a ray
+#: of the kind it chose (even or warped) is, else the most accurate within the tolerance: a ray
 #: composites many segments, and where their errors share a sign the image's error exceeds
 #: the per-segment estimate (the module notes: the SimVascular beam).
 COMPOSITING_MARGIN = 2.5
@@ -359,9 +360,13 @@ def _choose(tf: TransferFunction, sample: SegmentSample, data_range: tuple[float
     good = [o for o in options if o.error <= tolerance]
     if good:
         # Within the margin where a table of the kind chosen above is (the image adds up
-        # the errors of the segments along a ray), else within the tolerance.
+        # the errors of the segments along a ray), else the most accurate within the
+        # tolerance (so that a looser tolerance never buys a larger table).
         margin = [o for o in good if o.error <= tolerance / COMPOSITING_MARGIN]
-        return min(margin or good, key=lambda o: (cost[o], o.error))
+        if margin:
+            return min(margin, key=lambda o: (cost[o], o.error))
+        best_good = min(o.error for o in good)
+        return min((o for o in good if o.error <= best_good * (1 + _TIE)), key=lambda o: (cost[o], o.error))
     best = min(o.error for o in options)
     if not math.isfinite(best):  # NaN compares false: nothing would be within any tie of it
         raise ValueError(f"the table-size estimates are not finite ({[o.error for o in options]}) for a transfer "
