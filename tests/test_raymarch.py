@@ -231,23 +231,30 @@ def test_records_put_on_the_gl_before_the_walk_check_ends_go_if_it_fails(monkeyp
 
 def test_records_go_to_the_gl_in_blocks_and_leave_the_host(monkeypatch):
     """The per-tet records are built and written a block of tets at a time (here three
-    blocks of 4096, the last part of a row): the same image as from one block. Once they
-    are on the GL the host keeps none of them (the textures are the only copy a view reads,
-    rebuilt from the mesh if needed), nor the face adjacency's planes of every face."""
+    blocks of 4096, the last part of a row), by the caller from the first block and a helper
+    thread from the last (all of them, one, or none: its cap in bytes): the same image as
+    from one block. Once they are on the GL the host keeps none of them (the textures are the
+    only copy a view reads, rebuilt from the mesh if needed), nor the face adjacency's planes
+    of every face."""
+    from tetvr.gl import march_layout
     from tetvr.mesh import adjacency
 
     mesh = synthetic.cube(12)  # 10,368 tets
     cam = Camera.fit(mesh, direction=(0.4, -0.3, 1.0))
     images = []
-    for block in (adjacency.BLOCK_TETS, 4096):
-        monkeypatch.setattr(adjacency, "BLOCK_TETS", block)
+    one_block = 4096 * (march_layout.RECORD_TEXELS + 4) * 16
+    for block, helper in ((march_layout._SHARED_BLOCK, march_layout._HELPER_BYTES), (4096, 64 << 20),
+                          (4096, one_block), (4096, 0)):
+        monkeypatch.setattr(march_layout, "_SHARED_BLOCK", block)
+        monkeypatch.setattr(march_layout, "_HELPER_BYTES", helper)
         with tetvr.Renderer(RenderSettings(method="raymarch")) as r:
             images.append(r.render(mesh, cam, _tf(mesh), size=(64, 64)))
             rec = r._marcher._records
             assert rec.planes is None and rec.scalar is None and rec.links is None and rec.ids is None
             assert rec.boundary_slots.size > 0
-    assert len(adjacency.blocks(mesh.n_tets)) == 3 and images[0][..., 3].max() > 0.1
-    assert np.array_equal(images[0], images[1])
+    assert len(adjacency.blocks(mesh.n_tets, 4096)) == 3 and images[0][..., 3].max() > 0.1
+    for image in images[1:]:
+        assert np.array_equal(images[0], image)
     assert "normals" not in vars(adjacency.face_adjacency(mesh))
 
 
