@@ -37,7 +37,7 @@ from tetvr.optics.transfer import TransferFunction
 from tetvr.volume.volume import Volume
 from tetvr.gl.context import context_alive, create_context, describe
 from tetvr.gl.shaders import ShaderCompileError, assemble, explain
-from tetvr.gl.tablebuild import TableRuns
+from tetvr.gl.tablebuild import TableRuns, compile_runs
 from tetvr.gl.util import (_LLVMPIPE_TEXTURE_BYTES, _SOFTWARE_GL, Clock, GLOwner, check_size, clear_gl_errors,
                    free_video_memory, gl_locked, locked, make_target, set_uniforms, table_texture, tf_points_texture)
 
@@ -273,14 +273,9 @@ class Raycaster(GLOwner):
 
     def _runs_program(self) -> Any:
         """The compiled ``table_runs.comp`` (the table's runs on the GPU: :mod:`tetvr.gl.tablebuild`)."""
-        prog = self._programs.get(("table_runs",))
-        if prog is None:
-            src, files = assemble("table_runs.comp")
-            try:
-                prog = self._programs[("table_runs",)] = self.ctx.compute_shader(src)
-            except Exception as exc:
-                raise ShaderCompileError(f"table_runs.comp: {explain(exc, files)}") from exc
-        return prog
+        if ("table_runs",) not in self._programs:
+            self._programs[("table_runs",)] = compile_runs(self.ctx)
+        return self._programs[("table_runs",)]
 
     def _check_table(self, n_bins: int, n_slices: int) -> None:
         """Refuse a table this GL cannot hold, or this machine cannot build, before any

@@ -164,10 +164,9 @@ class Marcher:
         if pending is None or pending.mesh is not mesh:
             return
         if upload and pending.records.exception() is None:  # waits for the records
-            walked = pending.records.result()[0].mesh
-            capacity = raymarch_capacity(int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384)))
-            if (max(walked.n_tets, walked.n_points) <= capacity and not pending.records.result()[0].n_conflicting
-                    and not face_adjacency(walked).n_nonmanifold_faces):
+            distinct = pending.records.result()[0]
+            if (self._holds(distinct.mesh) and not distinct.n_conflicting
+                    and not face_adjacency(distinct.mesh).n_nonmanifold_faces):
                 self._use_mesh(mesh)
                 self._unused = mesh
         pending.check.exception()  # waits; an error is raised where the check is taken
@@ -182,6 +181,10 @@ class Marcher:
         if self._unused is mesh and self._mesh is mesh:
             self._drop_mesh()
         self._unused = None
+
+    def _holds(self, mesh: TetMesh) -> bool:
+        """Whether one texture of this GL holds the records of ``mesh``'s tets and points."""
+        return max(mesh.n_tets, mesh.n_points) <= raymarch_capacity(int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384)))
 
     def _drop_mesh(self) -> None:
         """Release the records on the GL."""
@@ -209,7 +212,7 @@ class Marcher:
         release_free_memory()  # the walk check's temporaries, before the textures take their place
         given, mesh = mesh, distinct.mesh
         max_tex = int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384))
-        if max(mesh.n_tets, mesh.n_points) > raymarch_capacity(max_tex):
+        if not self._holds(mesh):
             raise MemoryError(f"the ray caster holds at most {raymarch_capacity(max_tex)} tets and points in one texture "
                               f"on this GL (GL_MAX_TEXTURE_SIZE {max_tex}); the mesh has {mesh.n_tets} tets, "
                               f"{mesh.n_points} points: use "

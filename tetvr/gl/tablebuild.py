@@ -23,12 +23,22 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tetvr.gl.context import current_in_thread
+from tetvr.gl.shaders import ShaderCompileError, assemble, explain
 from tetvr.gl.util import clear_gl_errors
 
-__all__ = ["TableRuns"]
+__all__ = ["TableRuns", "compile_runs"]
 
 #: Invocations per work group (``local_size_x`` in table_runs.comp).
 _GROUP = 64
+
+
+def compile_runs(ctx: Any) -> Any:
+    """``table_runs.comp`` compiled in ``ctx`` (the caller owns the program)."""
+    src, files = assemble("table_runs.comp")
+    try:
+        return ctx.compute_shader(src)
+    except Exception as exc:
+        raise ShaderCompileError(f"table_runs.comp: {explain(exc, files)}") from exc
 
 
 class TableRuns:
