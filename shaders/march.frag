@@ -104,6 +104,11 @@ uniform float u_tolerance;
 uniform int u_max_steps;      // bound on tets per ray and layer (a walk caught by rounding)
 // Most tets a ray walks by face planes before it walks by points (see main).
 #define PLANE_STEPS 8
+// The walk goes by points from the first tet where the ray enters by a face whose points,
+// seen across the ray, weigh each at least this share: clear of the face's edges by more
+// than a rounding (on an edge the reference's tie rule decides, which the walk by planes
+// keeps).
+#define CLEAR_ENTRY 1.0e-3
 uniform float u_opaque;       // stop once alpha reaches this (early ray termination)
 
 #if MULTIPLICITY
@@ -218,6 +223,31 @@ bool enters(int s, vec3 o, vec3 d, vec3 ow, vec3 e1, vec3 e2, float inv_dd, out 
     return (min(E.x, min(E.y, E.z)) >= 0.0 || max(E.x, max(E.y, E.z)) <= 0.0) && E != vec3(0.0);
 }
 
+// Face k of a tet (its point ids: ids) seen across the ray: its points' slots (k + 1, k + 2,
+// k + 3, in an order that turns counter-clockwise about the ray), their places p, ts and
+// scalars ss, and the edge values E (E.x = e(pb, pc), E.y = e(pc, pa), E.z = e(pa, pb)):
+// all >= 0 where the triangle holds the ray.
+void face_across(ivec4 ids, int k, vec3 ow, vec3 e1, vec3 e2, vec3 d, float inv_dd, out int sa, out int sb,
+                 out int sc, out vec2 pa, out vec2 pb, out vec2 pc, out vec3 ts, out vec3 ss, out vec3 E) {
+    sa = (k + 1) & 3; sb = (k + 2) & 3; sc = (k + 3) & 3;
+    vec4 qa = point_record(ids[sa]), qb = point_record(ids[sb]), qc = point_record(ids[sc]);
+    vec3 a = across(qa.xyz - ow, e1, e2, d, inv_dd), b = across(qb.xyz - ow, e1, e2, d, inv_dd),
+         c = across(qc.xyz - ow, e1, e2, d, inv_dd);
+    pa = a.xy;
+    pb = b.xy;
+    pc = c.xy;
+    ts = vec3(a.z, b.z, c.z);
+    ss = vec3(qa.w, qb.w, qc.w);
+    E = vec3(cross2(pb, pc), cross2(pc, pa), cross2(pa, pb));
+    if (E.x + E.y + E.z < 0.0) {  // clockwise about the ray: swap b and c
+        int i = sb; sb = sc; sc = i;
+        vec2 p = pb; pb = pc; pc = p;
+        ts = ts.xzy;
+        ss = ss.xzy;
+        E = -E.xzy;
+    }
+}
+
 // The slot in the next tet of the point in slot s of this one, the ray going from face k
 // here to face f there: the records list each tet's points in increasing id, so the three
 // points of a face come in the same order in both tets.
@@ -273,12 +303,14 @@ void main() {
     vec3 ow = ray_from_eye(gl_FragCoord.xy);
     int tet, face;
     float t_in;
+    bool faced = false;  // the ray enters by a face it does not see edge-on
     if (entry >= 0) {
         tet = entry >> 2;
         face = entry & 3;
         vec4 entry_plane = face_plane(tet, face);
         float entry_den = dot(entry_plane.xyz, d);
-        if (entry_den < -GRAZING * per_t) {
+        faced = entry_den < -GRAZING * per_t;
+        if (faced) {
             t_in = max(-(dot(entry_plane.xyz, o) + entry_plane.w) / entry_den, u_near);
         } else {
             // The face it was drawn for is seen almost edge-on, where a rounding moves the
@@ -338,11 +370,16 @@ void main() {
     vec2 pa, pb, pc;
     vec3 ts, ss, E;
 
-    // Until then, by face planes: the first tet (which a ray starting at the near plane
-    // entered by no face) is left by the nearest of the three faces other than the one
-    // it came in by whose plane the ray points out of; and so is each next tet until the
-    // face the ray leaves by holds the ray as seen across it (the rasteriser may give a
-    // grazing ray an entry it misses by a rounding; the walk by planes finds its way back).
+    // Where the face the ray enters by holds it as seen across it, the walk goes by points
+    // from the first tet on. Else by face planes until then: the first tet (which a ray
+    // starting at the near plane entered by no face) is left by the nearest of the three
+    // faces other than the one it came in by whose plane the ray points out of; and so is
+    // each next tet until the face the ray leaves by holds the ray as seen across it (the
+    // rasteriser may give a grazing ray an entry it misses by a rounding; the walk by
+    // planes finds its way back). A plane's t is rounding where the tet is a sliver seen
+    // face-on (its four faces nearly in one plane): the nearest exit plane is then any of
+    // three, and a walk by planes from a sliver at the boundary went astray (a Delaunay
+    // mesh's hull); the points' signs decide it as the reference does.
     vec4 g = tet_scalar(tet);
     float s_in = dot(g.xyz, o + t_in * d) + g.w;
     float t_out = t_in, s_out = s_in;
@@ -353,7 +390,18 @@ void main() {
     int k = 0;
     bool ended = false;  // the walk stopped as it should: opaque, at its window's end, out of the mesh
     bool missed = false;  // the ray's first point lies outside the tet it was given (see below)
-    for (int step = 0; step < PLANE_STEPS && step < u_max_steps; ++step) {
+    if (faced) {
+        ivec4 ids = tet_ids(tet);
+        face_across(ids, face, ow, e1, e2, d, inv_dd, sa, sb, sc, pa, pb, pc, ts, ss, E);
+        if (min(E.x, min(E.y, E.z)) > CLEAR_ENTRY * (E.x + E.y + E.z)) {
+            // As if the ray came from a tet across the entry face (next_slot(s, f, f) = s):
+            // the walk's first step takes this tet, its fourth point and its cell scalar.
+            by_points = true;
+            k = face;
+            link = ivec4(4 * tet + face, ids[face], floatBitsToInt(g.w), 0);
+        }
+    }
+    for (int step = 0; !by_points && step < PLANE_STEPS && step < u_max_steps; ++step) {
         float t_exit = 3.0e38;
         int exit_face = -1;
         for (int j = 1; j < 4; ++j) {
@@ -383,24 +431,7 @@ void main() {
             break;
         }
         // The exit face's three points, in slots k + 1, k + 2, k + 3.
-        ivec4 ids = tet_ids(tet);
-        sa = (k + 1) & 3; sb = (k + 2) & 3; sc = (k + 3) & 3;
-        vec4 qa = point_record(ids[sa]), qb = point_record(ids[sb]), qc = point_record(ids[sc]);
-        vec3 a = across(qa.xyz - ow, e1, e2, d, inv_dd), b = across(qb.xyz - ow, e1, e2, d, inv_dd),
-             c = across(qc.xyz - ow, e1, e2, d, inv_dd);
-        pa = a.xy;
-        pb = b.xy;
-        pc = c.xy;
-        ts = vec3(a.z, b.z, c.z);
-        ss = vec3(qa.w, qb.w, qc.w);
-        E = vec3(cross2(pb, pc), cross2(pc, pa), cross2(pa, pb));
-        if (E.x + E.y + E.z < 0.0) {  // clockwise about the ray: swap b and c
-            int i = sb; sb = sc; sc = i;
-            vec2 p = pb; pb = pc; pc = p;
-            ts = ts.xzy;
-            ss = ss.xzy;
-            E = -E.xzy;
-        }
+        face_across(tet_ids(tet), k, ow, e1, e2, d, inv_dd, sa, sb, sc, pa, pb, pc, ts, ss, E);
         if (min(E.x, min(E.y, E.z)) >= 0.0 || step == PLANE_STEPS - 1) {
             by_points = true;
             break;

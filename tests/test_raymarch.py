@@ -232,7 +232,7 @@ def test_records_put_on_the_gl_before_the_walk_check_ends_go_if_it_fails(monkeyp
 def test_records_go_to_the_gl_in_blocks_and_leave_the_host(monkeypatch):
     """The per-tet records are built and written a block of tets at a time (here three
     blocks of 4096, the last part of a row), by the caller from the first block and a helper
-    thread from the last (all of them, one, or none: its cap in bytes): the same image as
+    thread from the last (holding many, one or no blocks the caller has not taken): the same image as
     from one block. Once they are on the GL the host keeps none of them (the textures are the
     only copy a view reads, rebuilt from the mesh if needed), nor the face adjacency's planes
     of every face."""
@@ -242,11 +242,10 @@ def test_records_go_to_the_gl_in_blocks_and_leave_the_host(monkeypatch):
     mesh = synthetic.cube(12)  # 10,368 tets
     cam = Camera.fit(mesh, direction=(0.4, -0.3, 1.0))
     images = []
-    one_block = 4096 * (march_layout.RECORD_TEXELS + 4) * 16
-    for block, helper in ((march_layout._SHARED_BLOCK, march_layout._HELPER_BYTES), (4096, 64 << 20),
-                          (4096, one_block), (4096, 0)):
+    for block, helper in ((march_layout._SHARED_BLOCK, march_layout._HELPER_AHEAD), (4096, 100),
+                          (4096, 1), (4096, 0)):
         monkeypatch.setattr(march_layout, "_SHARED_BLOCK", block)
-        monkeypatch.setattr(march_layout, "_HELPER_BYTES", helper)
+        monkeypatch.setattr(march_layout, "_HELPER_AHEAD", helper)
         with tetvr.Renderer(RenderSettings(method="raymarch")) as r:
             images.append(r.render(mesh, cam, _tf(mesh), size=(64, 64)))
             rec = r._marcher._records
@@ -256,6 +255,37 @@ def test_records_go_to_the_gl_in_blocks_and_leave_the_host(monkeypatch):
     for image in images[1:]:
         assert np.array_equal(images[0], image)
     assert "normals" not in vars(adjacency.face_adjacency(mesh))
+
+
+def test_both_ends_yield_every_block_once_and_raise_a_helpers_error(monkeypatch):
+    """The records' blocks from both ends: each block once, whatever the helper's bound (the
+    caller takes the helper's blocks after each of its own, out of order), and an error in
+    a block the helper built is raised to the caller."""
+    import time
+
+    from tetvr.gl import march_layout
+
+    mesh = synthetic.cube(12)
+    n_blocks = len(march_layout.adjacency.blocks(mesh.n_tets, 1024))
+
+    def fake(m, rec, rows):
+        time.sleep(0.002)
+        if rows.start == fail:
+            raise RuntimeError("block failed")
+        return rows.start, rows.stop
+
+    monkeypatch.setattr(march_layout, "_SHARED_BLOCK", 1024)
+    monkeypatch.setattr(march_layout, "cell_records", fake)
+    fail = -1
+    for ahead in (0, 1, 4):
+        monkeypatch.setattr(march_layout, "_HELPER_AHEAD", ahead)
+        got = [(rows.start, a, b) for rows, a, b in march_layout._BothEnds(mesh, None)]
+        assert sorted(g[0] for g in got) == [i * 1024 for i in range(n_blocks)]
+        assert all(a == start for start, a, _ in got)
+    monkeypatch.setattr(march_layout, "_HELPER_AHEAD", 4)
+    fail = (n_blocks - 1) * 1024  # the helper's first block
+    with pytest.raises(RuntimeError, match="block failed"):
+        list(march_layout._BothEnds(mesh, None))
 
 
 def test_method_setting():

@@ -153,41 +153,43 @@ def records_textures(ctx: Any, layout: Layout, mesh: TetMesh, rec: MarchRecords,
 #: Tets a block of the records is built in by :class:`_BothEnds` (a multiple of every row of
 #: :class:`Layout`: at most 4096 tets a row of the planes and links).
 _SHARED_BLOCK = 1 << 14
-#: The most bytes of records the helper of :class:`_BothEnds` builds ahead of the caller
-#: (144 bytes a tet: ~470k tets).
-_HELPER_BYTES = 64 << 20
+#: The most blocks the helper of :class:`_BothEnds` holds built that the caller has not
+#: taken yet (0: no helper). The caller takes them after each of its own, so it rarely waits
+#: at this bound; it bounds the host memory of records in flight (~2.4 MB a block).
+_HELPER_AHEAD = 4
 
 
 class _BothEnds:
     """The per-tet records of ``mesh`` (:func:`~tetvr.mesh.records.cell_records`), block by
-    block in order: the caller builds them from the first block on as it iterates, and a
-    helper thread from the last block back, until the two meet (numpy lets go of the GIL
-    in its loops: on bluntfin's 187k tets, 0.55 s -> 0.35 s on two cores). The helper's
-    blocks wait for the caller, so it builds at most :data:`_HELPER_BYTES` of them. (Both
-    threads taking the next block in turn, the helper a few blocks ahead at most, measured
-    0.5 s: the caller waits for the helper's blocks between its own.)"""
+    block: the caller builds them from the first block on as it iterates, and a helper
+    thread from the last block back, until the two meet (numpy lets go of the GIL in its
+    loops: on bluntfin's 187k tets, 0.55 s -> 0.35 s on two cores). After each of its own
+    blocks the caller yields the helper's built since, so blocks come out of order and few
+    wait in memory (:data:`_HELPER_AHEAD` at most; they waited for the caller to reach them
+    before: 64 MiB more at the peak of 2M tets' first frame). (Both threads taking the next
+    block in turn measured slower on bluntfin, 0.5 s against 0.35 s: the caller waits for
+    the helper's blocks between its own.)"""
 
     def __init__(self, mesh: TetMesh, rec: MarchRecords) -> None:
         self.mesh, self.rec = mesh, rec
         self.rows = adjacency.blocks(mesh.n_tets, _SHARED_BLOCK)
         self.front, self.back = 0, len(self.rows) - 1  # the next block each side takes
-        # The helper stops above this block: what it builds waits for the caller in memory.
-        per_block = _SHARED_BLOCK * (RECORD_TEXELS + 4) * 16
-        self.stop = max(len(self.rows) - _HELPER_BYTES // per_block, 0)
+        self.stopped = False
         self.built: dict[int, tuple[NDArray[np.float32], NDArray[np.int32]] | BaseException] = {}
         self.cond = threading.Condition()
-        if len(self.rows) > 1:
+        if len(self.rows) > 1 and _HELPER_AHEAD > 0:
             threading.Thread(target=self._helper, name="tetvr-records-back", daemon=True).start()
 
     def _helper(self) -> None:
         while True:
             with self.cond:
-                if self.back < max(self.front, self.stop):
+                self.cond.wait_for(lambda: self.stopped or len(self.built) < _HELPER_AHEAD)
+                if self.stopped or self.back < self.front:
                     return
                 i, self.back = self.back, self.back - 1
             try:
                 result: Any = cell_records(self.mesh, self.rec, self.rows[i])
-            except BaseException as exc:  # raised in the caller, at that block
+            except BaseException as exc:  # raised in the caller, with that block
                 result = exc
             with self.cond:
                 self.built[i] = result
@@ -195,27 +197,32 @@ class _BothEnds:
 
     def __iter__(self) -> Iterator[tuple[slice, NDArray[np.float32], NDArray[np.int32]]]:
         try:
-            yield from self._in_order()
+            yield from self._blocks()
         finally:  # done, or the caller stopped: the helper takes no more blocks
             with self.cond:
-                self.stop = len(self.rows)
+                self.stopped = True
                 self.built.clear()
+                self.cond.notify_all()
 
-    def _in_order(self) -> Iterator[tuple[slice, NDArray[np.float32], NDArray[np.int32]]]:
-        for i, rows in enumerate(self.rows):
+    def _blocks(self) -> Iterator[tuple[slice, NDArray[np.float32], NDArray[np.int32]]]:
+        left = len(self.rows)
+        while left:
             with self.cond:
-                mine = self.front <= self.back
-                if mine:
+                mine = self.front if self.front <= self.back else None
+                if mine is not None:
                     self.front += 1
-            if mine:
-                yield (rows, *cell_records(self.mesh, self.rec, rows))
-                continue
-            with self.cond:
-                self.cond.wait_for(lambda: i in self.built)
-                result = self.built.pop(i)
-            if isinstance(result, BaseException):
-                raise result
-            yield (rows, *result)
+                else:  # the rest are the helper's: wait for one
+                    self.cond.wait_for(lambda: bool(self.built))
+                ready, self.built = self.built, {}
+                self.cond.notify_all()
+            if mine is not None:
+                left -= 1
+                yield (self.rows[mine], *cell_records(self.mesh, self.rec, self.rows[mine]))
+            for i, result in sorted(ready.items()):
+                if isinstance(result, BaseException):
+                    raise result
+                left -= 1
+                yield (self.rows[i], *result)
 
 
 def texture(ctx: Any, items: NDArray[Any], per_row: int, texels: int, fill: float) -> Any:

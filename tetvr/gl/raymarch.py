@@ -170,6 +170,8 @@ class Marcher:
                 self._use_mesh(mesh)
                 self._unused = mesh
         pending.check.exception()  # waits; an error is raised where the check is taken
+        if self._unused is mesh:
+            release_free_memory()  # the check's temporaries, freed while the records went to the GL
         if self._mesh is mesh:
             self._prefetch = None  # taken
         if not keep:

@@ -19,7 +19,7 @@ makes rasteriser fill conventions watertight).
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Iterator, NamedTuple
+from typing import Any, Callable, Iterator, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -30,6 +30,7 @@ from tetvr.core.image import image_size
 from tetvr.core.rays import EyeRays
 from tetvr.mesh.adjacency import FACE_VERTICES
 from tetvr.mesh.tetmesh import TetMesh
+from tetvr.reference.boxes import candidates
 
 __all__ = ["DEFAULT_CHUNK", "RaySegments", "pixel_extents", "ray_lengths", "ray_segments"]
 
@@ -108,7 +109,11 @@ def _tet_geometry(mesh: TetMesh, camera: Camera, rays: EyeRays, pixels: Int | No
     base = None
     ids = mesh.tets
     if pixels is not None:  # a few pixels of a large mesh: their tets first, cheaply
-        base = np.flatnonzero(_may_cover(pts, ids, rays, pixels))
+        held = _held_by(pixels, rays)
+        some = candidates(mesh, np.asarray(camera.position, dtype=np.float64), view[:3, :3], rays, held)
+        base = np.flatnonzero(_may_cover(pts, ids if some is None else ids[some], rays, held))
+        if some is not None:
+            base = some[base]
         ids = ids[base]
     ids = np.sort(ids.astype(np.int64), axis=1)
     p = pts[ids]  # (m, 4, 3)
@@ -169,12 +174,12 @@ def _tet_geometry(mesh: TetMesh, camera: Camera, rays: EyeRays, pixels: Int | No
     )
 
 
-def _may_cover(pts: Float, tets: Int, rays: EyeRays, pixels: Int) -> NDArray[np.bool_]:
-    """Per tet, whether its box (:func:`_pixel_boxes`) may hold one of ``pixels``: the box
-    of its vertices' projections where all lie in front of the near plane (the same box,
-    by the same arithmetic), and every tet that reaches the near plane (its box comes from
-    the cut; kept). A summed table of the pixels counts those in each box. Per point, then
-    four columns of the tets (numpy reduces a short last axis slowly)."""
+def _may_cover(pts: Float, tets: Int, rays: EyeRays, held: Callable[..., NDArray[np.bool_]]) -> NDArray[np.bool_]:
+    """Per tet, whether its box (:func:`_pixel_boxes`) may hold one of the pixels ``held``
+    counts (:func:`_held_by`): the box of its vertices' projections where all lie in front
+    of the near plane (the same box, by the same arithmetic), and every tet that reaches
+    the near plane (its box comes from the cut; kept). Per point, then four columns of the
+    tets (numpy reduces a short last axis slowly)."""
     depth = -pts[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         col, row = _pixel_coords(pts[:, 0], pts[:, 1], None if rays.parallel else depth, rays)
@@ -188,15 +193,25 @@ def _may_cover(pts: Float, tets: Int, rays: EyeRays, pixels: Int) -> NDArray[np.
 
     kept = loose[t[0]] | loose[t[1]] | loose[t[2]] | loose[t[3]]
     col, row = np.where(loose, 0.0, col), np.where(loose, 0.0, row)
-    c_lo, c_hi, r_lo, r_hi = _box(pick(col, np.minimum), pick(col, np.maximum), pick(row, np.minimum),
-                                  pick(row, np.maximum), rays)
+    return held(pick(col, np.minimum), pick(col, np.maximum), pick(row, np.minimum), pick(row, np.maximum)) | kept
+
+
+def _held_by(pixels: Int, rays: EyeRays) -> Callable[..., NDArray[np.bool_]]:
+    """``held(col_min, col_max, row_min, row_max)``: per box of pixel coordinates, whether
+    the pixel centres it holds (:func:`_box`) include one of ``pixels``, from a summed
+    table of the pixels."""
     mask = np.zeros((rays.height + 1, rays.width + 1), dtype=np.int64)
     np.add.at(mask, (pixels // rays.width + 1, pixels % rays.width + 1), 1)
     table = mask.cumsum(axis=0).cumsum(axis=1)
-    ok = (c_lo <= c_hi) & (r_lo <= r_hi)
-    c_lo, c_hi, r_lo, r_hi = (np.where(ok, a, 0) for a in (c_lo, c_hi, r_lo, r_hi))
-    held = table[r_hi + 1, c_hi + 1] - table[r_lo, c_hi + 1] - table[r_hi + 1, c_lo] + table[r_lo, c_lo]
-    return (ok & (held > 0)) | kept
+
+    def held(col_min: Float, col_max: Float, row_min: Float, row_max: Float) -> NDArray[np.bool_]:
+        c_lo, c_hi, r_lo, r_hi = _box(col_min, col_max, row_min, row_max, rays)
+        ok = (c_lo <= c_hi) & (r_lo <= r_hi)
+        c_lo, c_hi, r_lo, r_hi = (np.where(ok, a, 0) for a in (c_lo, c_hi, r_lo, r_hi))
+        count = table[r_hi + 1, c_hi + 1] - table[r_lo, c_hi + 1] - table[r_hi + 1, c_lo] + table[r_lo, c_lo]
+        return ok & (count > 0)
+
+    return held
 
 
 def _pixel_coords(x: Float, y: Float, depth: Float | None, rays: EyeRays) -> tuple[Float, Float]:
