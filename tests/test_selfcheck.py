@@ -114,7 +114,7 @@ def test_runs_boxes_keep_every_tet_a_pixel_may_need_and_few_others():
     from tetvr.core.camera import resolve_clipping_range
     from tetvr.core.rays import EyeRays
     from tetvr.reference import boxes as run_boxes
-    from tetvr.reference.segments import _held_by, _may_cover
+    from tetvr.reference.segments import _held_by, _may_cover, _pixel_coords
 
     mesh = synthetic.cube(20)  # 48,000 tets: above MIN_TETS
     assert mesh.n_tets >= run_boxes.MIN_TETS
@@ -124,7 +124,8 @@ def test_runs_boxes_keep_every_tet_a_pixel_may_need_and_few_others():
     pts = (mesh.points - np.asarray(camera.position)) @ view[:3, :3].T
     for pixel in (256 * 128 + 128, 256 * 60 + 100):
         held = _held_by(np.array([pixel]), rays)
-        some = run_boxes.candidates(mesh, np.asarray(camera.position, dtype=np.float64), view[:3, :3], rays, held)
+        some = run_boxes.candidates(mesh, np.asarray(camera.position, dtype=np.float64), view[:3, :3], rays, _pixel_coords,
+                                        held)
         needed = np.flatnonzero(_may_cover(pts, mesh.tets, rays, held))
         assert needed.size > 0 and np.isin(needed, some).all()
         assert some.size < mesh.n_tets / 4

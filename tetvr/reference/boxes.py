@@ -74,21 +74,22 @@ def tet_boxes(mesh: TetMesh) -> TetBoxes:
 
 
 def candidates(mesh: TetMesh, position: NDArray[np.float64], rotation: NDArray[np.float64], rays: EyeRays,
+               project: Callable[..., tuple[NDArray[np.float64], NDArray[np.float64]]],
                held: Callable[..., NDArray[np.bool_]]) -> NDArray[np.int64] | None:
     """The tets (increasing ids) of the runs whose boxes may hold one of the pixels that
     ``held`` counts: ``held(col_min, col_max, row_min, row_max)`` says, per box, whether
-    its range of pixel coordinates holds one. Eye space is ``(x - position) @ rotation.T``.
-    None below :data:`MIN_TETS` tets (every tet is a candidate)."""
+    its range of pixel coordinates holds one. Eye space is ``(x - position) @ rotation.T``,
+    ``project(x, y, depth or None, rays)`` its pixel coordinates (the tets' own, for the
+    same arithmetic). None below :data:`MIN_TETS` tets (every tet is a candidate)."""
     if mesh.n_tets < MIN_TETS:
         return None
     boxes = tet_boxes(mesh)
-    from tetvr.reference.segments import _pixel_coords  # the tets' own projection, for the same arithmetic
 
     corners = np.stack([np.where([(c >> a) & 1 for a in range(3)], boxes.hi, boxes.lo) for c in range(8)], axis=1)
     eye = (corners - position) @ rotation.T  # (runs, 8, 3)
     depth = -eye[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        col, row = _pixel_coords(eye[..., 0], eye[..., 1], None if rays.parallel else depth, rays)
+        col, row = project(eye[..., 0], eye[..., 1], None if rays.parallel else depth, rays)
     loose = ~(np.isfinite(col) & np.isfinite(row)).all(axis=1)
     if not rays.parallel:
         loose |= (depth < rays.near).any(axis=1)
