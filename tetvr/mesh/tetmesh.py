@@ -446,9 +446,11 @@ def _max_edge(points: NDArray[np.float64], tets: NDArray[np.integer[Any]]) -> ND
     out = np.empty(tets.shape[0])
     pairs = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
     for rows in _blocks(tets.shape[0]):
-        p = points[tets[rows]]
-        out[rows] = np.max([np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in pairs], axis=0)
-    return out
+        p = [points[tets[rows, k]] for k in range(4)]
+        squares = [np.einsum("ij,ij->i", p[i] - p[j], p[i] - p[j]) for i, j in pairs]
+        out[rows] = np.maximum(np.maximum(np.maximum(squares[0], squares[1]), np.maximum(squares[2], squares[3])),
+                               np.maximum(squares[4], squares[5]))
+    return np.sqrt(out, out=out)  # one root a tet, of its longest edge's square
 
 
 def _cell_column(blocks: list[NDArray[Any]]) -> NDArray[Any]:
