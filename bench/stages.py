@@ -27,6 +27,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import json
 import datetime as _dt
 import functools
 import os
@@ -371,7 +372,8 @@ def plot(res: dict[str, Any], path: Path) -> None:
     meshes = sorted(res.get("meshes", []), key=lambda m: m["n_tets"])
     fig, axes = plt.subplots(2, 2, figsize=(14, 10))
     colours = dict(zip(VIEW_STAGES, ("#4c72b0", "#dd8452", "#937860", "#c44e52", "#55a868")))
-    labels = [f"{m['name'].replace(' (', chr(10) + '(')}\n{_label(m['n_tets'])} tets" for m in meshes]
+    # "beam_tet4_result_100 (VonMises_stress)" -> "beam": ten full names overlap under the bars.
+    labels = [f"{m['name'].split(' ')[0].split('_')[0]}\n{_label(m['n_tets'])}" for m in meshes]
     x = np.arange(len(meshes))
     gl = res.get("gl", {}).get("GL_RENDERER", "?")
 
@@ -497,7 +499,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=REPO / "bench" / "results", help="output folder")
     ap.add_argument("--repeats", type=int, default=None, help="frames per mesh after warm-up (default 5, 3 with --quick)")
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder with the real .vtu meshes")
+    ap.add_argument("--replot", action="store_true", help="only draw the chart again from the JSON in --out")
     args = ap.parse_args(argv)
+    if args.replot:
+        plot(json.loads((args.out / "stages.json").read_text()), args.out / "stages.png")
+        return 0
     repeats = args.repeats or (3 if args.quick else 5)
     if repeats < 1:
         ap.error("--repeats must be >= 1")
