@@ -62,6 +62,41 @@ def methods_vs_vtk(name: str = "vs_vtk.json") -> str:
             f"({r['date']}, `bench/results/{name}`).\n\n" + "\n".join(rows))
 
 
+def methods_vs_vtk_inside() -> str:
+    """Views from inside each mesh (bench/vs_vtk.py's ``inside``): the default and VTK's PT
+    per view change at both sizes, and their accuracy against the exact reference."""
+    runs = [r for r in (_load("vs_vtk.json"), _load("vs_vtk_1024.json")) if any("inside" in m for m in r["meshes"])]
+    if not runs:
+        return "No run of `bench/vs_vtk.py` with views from inside yet."
+    by_name: dict[str, dict[str, Any]] = {}
+    for r in runs:
+        for m in r["meshes"]:
+            if "inside" in m:
+                by_name.setdefault(m["name"], {"n_tets": m["n_tets"]})[r["size"][0]] = m["inside"]
+    sizes = [r["size"][0] for r in runs]
+    head = "| mesh | tets |" + "".join(f" {s}²: default ms | VTK PT ms | VTK / default |" for s in sizes)
+    rows = [head + " PSNR default | PSNR VTK | largest error, default | VTK |",
+            "|---|---:|" + "---:|---:|---:|" * len(sizes) + "---:|---:|---:|---:|"]
+    acc_size = None
+    for name, per in sorted(by_name.items(), key=lambda kv: kv[1]["n_tets"]):
+        cells = ""
+        for s in sizes:
+            ins = per.get(s)
+            cells += (f" {ins['view_change_median_s']['tetvr'] * 1e3:.0f} | {ins['view_change_median_s']['vtk_pt'] * 1e3:.0f}"
+                      f" | {ins['speedup_vs_vtk_pt']:.2f} |") if ins else " | | |"
+        acc = per[sizes[0]] if sizes[0] in per else per[sizes[-1]]
+        acc_size = "x".join(str(v) for v in acc["accuracy_size"])
+        rows.append(f"| {name} | {per['n_tets']:,} |{cells} {acc['psnr']['tetvr']:.1f} | {acc['psnr']['vtk_pt']:.1f} "
+                    f"| {acc['max_error']['tetvr']:.1e} | {acc['max_error']['vtk_pt']:.2f} |")
+    dates = ", ".join(f"{r['date'][:10]} `bench/results/{'vs_vtk' if r['size'][0] == 512 else 'vs_vtk_' + str(r['size'][0])}.json`"
+                      for r in runs)
+    return (f"The eye inside each mesh (at the centroid of the cell nearest its bounding box's centre, looking "
+            f"along the box's longest axis, 60 degrees), the view turned {runs[0]['meshes'][0]['inside']['step_deg']:g} "
+            f"degrees about the eye per frame; median of {runs[0]['repeats']} view changes, frames in turn; accuracy "
+            f"(PSNR in dB, largest per-pixel error) against the exact reference at {acc_size} ({dates}).\n\n"
+            + "\n".join(rows))
+
+
 def methods_vs_vtk_1024() -> str:
     """:func:`methods_vs_vtk` at 1024x1024 (``bench/vs_vtk.py --size 1024``)."""
     return methods_vs_vtk("vs_vtk_1024.json")
@@ -762,7 +797,7 @@ def grazing() -> str:
 
 TABLES: dict[str, Callable[[], str]] = {"imperfect_meshes": imperfect_meshes, "frame_memory": frame_memory, "marching_memory": marching_memory, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
                                         "compare_demo": compare_demo,
-                                        "viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "methods_vs_vtk_1024": methods_vs_vtk_1024, "raymarch_stages": raymarch_stages,
+                                        "viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "methods_vs_vtk_1024": methods_vs_vtk_1024, "methods_vs_vtk_inside": methods_vs_vtk_inside, "raymarch_stages": raymarch_stages,
                                         "volume_accuracy": volume_accuracy,
                                         "spiky_tf": spiky_tf, "degenerate": degenerate, "grazing": grazing,
                                         "distributed_series": distributed_series,
