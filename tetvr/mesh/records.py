@@ -223,7 +223,9 @@ def cell_records(mesh: TetMesh, rec: MarchRecords, rows: slice) -> tuple[NDArray
     if mesh.cell_scalars is not None:
         links[:, 2] = np.where(inner, mesh.cell_scalars[nbr].astype(np.float32).view(np.int32), 0)
     elif adj.canonical is not None:
-        links[:, 3] = _jumps(rec.ids, rows, mates, np.asarray(mesh.scalars, dtype=np.float32))
+        values = np.asarray(mesh.scalars, dtype=np.float32)
+        if np.any(values[adj.canonical] != values):  # else every copy of a point carries its value
+            links[:, 3] = _jumps(rec.ids, rows, mates, values)
     return texels, links.reshape(n, 4, 4)
 
 
