@@ -52,6 +52,7 @@ prints a table. Needs ``pip install -e ".[compare,bench]"``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime as _dt
 import functools
 import json
@@ -69,6 +70,7 @@ sys.path.insert(0, str(ROOT))
 import tetvr  # noqa: E402
 from tetvr import Camera  # noqa: E402
 from tetvr.core.camera import default_view_up  # noqa: E402
+from tetvr.apps.animate import azimuth  # noqa: E402
 from tetvr.mesh import synthetic  # noqa: E402
 from tetvr.core.image import psnr, rmse, write_png  # noqa: E402
 from tetvr.mesh.tetmesh import TetMesh  # noqa: E402
@@ -229,8 +231,7 @@ def inside_camera(mesh: TetMesh) -> Camera:
     box's centre, looking along the box's longest axis (tilted off it a little, so that no
     face of a grid is seen edge-on by construction), 60 degrees."""
     lo, hi = mesh.bounds
-    pts, tets = mesh.points, mesh.tets
-    centroid = (pts[tets[:, 0]] + pts[tets[:, 1]] + pts[tets[:, 2]] + pts[tets[:, 3]]) / 4.0
+    centroid = mesh.centroids
     eye = centroid[int(np.argmin(np.linalg.norm(centroid - (lo + hi) / 2.0, axis=1)))]
     axis = int(np.argmax(hi - lo))
     d = np.zeros(3)
@@ -239,15 +240,12 @@ def inside_camera(mesh: TetMesh) -> Camera:
 
 
 def turn(camera: Camera, degrees: float) -> Camera:
-    """``camera`` with its view turned by ``degrees`` about its view up, through the eye."""
-    k = np.asarray(camera.view_up, dtype=np.float64)
-    k /= np.linalg.norm(k)
-    eye = np.asarray(camera.position)
-    v = np.asarray(camera.focal_point) - eye
-    a = np.radians(degrees)
-    v = v * np.cos(a) + np.cross(k, v) * np.sin(a) + k * np.dot(k, v) * (1.0 - np.cos(a))
-    return Camera(position=camera.position, focal_point=tuple(eye + v), view_up=camera.view_up,
-                  view_angle=camera.view_angle)
+    """``camera`` with its view turned by ``degrees`` about its view up, through the eye:
+    :func:`~tetvr.apps.animate.azimuth` (which turns the eye about the focal point) with the
+    two points swapped."""
+    swapped = dataclasses.replace(camera, position=camera.focal_point, focal_point=camera.position)
+    turned = azimuth(swapped, degrees)
+    return dataclasses.replace(camera, focal_point=turned.position)
 
 
 def bench_inside(mesh: TetMesh, tf: Any, size: tuple[int, int], repeats: int) -> dict[str, Any]:

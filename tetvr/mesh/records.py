@@ -112,6 +112,8 @@ class MarchRecords:
     boundary_spheres : (F, 4) float64, a sphere round each boundary face (centre, radius).
     origin : (3,) float64, the mesh's bounding-box centre.
     convex : the mesh fills a convex region (no ray enters twice).
+    may_jump : some welded point's copies carry other float32 values (else no face jumps,
+        and :func:`cell_records` does not look for jumps).
     """
 
     ids: NDArray[np.int32] | None
@@ -125,6 +127,7 @@ class MarchRecords:
     boundary_spheres: NDArray[np.float64]
     origin: NDArray[np.float64]
     convex: bool
+    may_jump: bool = False
     planes: NDArray[np.float32] | None = None
     scalar: NDArray[np.float32] | None = None
     links: NDArray[np.int32] | None = None
@@ -182,7 +185,8 @@ def march_records(mesh: TetMesh, *, cells: bool = True) -> MarchRecords:
     rec = MarchRecords(ids=ids, boundary_slots=slots, boundary_triangles=tri.astype(np.float32),
                        boundary_corners=corners, boundary_edges=edge_keys, boundary_pairs=pairs,
                        boundary_neighbors=_neighbors(slots, pairs), boundary_planes=planes.astype(np.float64),
-                       boundary_spheres=spheres, origin=origin, convex=bool(adj.convex))
+                       boundary_spheres=spheres, origin=origin, convex=bool(adj.convex),
+                       may_jump=_may_jump(mesh, adj.canonical))
     if not cells:
         return rec
     texels = np.empty((mesh.n_tets, RECORD_TEXELS, 4), dtype=np.float32)
@@ -222,10 +226,8 @@ def cell_records(mesh: TetMesh, rec: MarchRecords, rows: slice) -> tuple[NDArray
     links[rec.boundary_slots[first:last] - 4 * rows.start, 1] = np.arange(first, last, dtype=np.int32)
     if mesh.cell_scalars is not None:
         links[:, 2] = np.where(inner, mesh.cell_scalars[nbr].astype(np.float32).view(np.int32), 0)
-    elif adj.canonical is not None:
-        values = np.asarray(mesh.scalars, dtype=np.float32)
-        if np.any(values[adj.canonical] != values):  # else every copy of a point carries its value
-            links[:, 3] = _jumps(rec.ids, rows, mates, values)
+    elif rec.may_jump:
+        links[:, 3] = _jumps(rec.ids, rows, mates, np.asarray(mesh.scalars, dtype=np.float32))
     return texels, links.reshape(n, 4, 4)
 
 
@@ -261,6 +263,15 @@ def _scalar_records(mesh: TetMesh, origin: NDArray[np.float64], rows: slice) -> 
     scalar[:, :3] = grad
     scalar[:, 3] = mesh.scalars[tets[:, 0]] - np.einsum("ij,ij->i", grad, p0)
     return scalar
+
+
+def _may_jump(mesh: TetMesh, canonical: NDArray[np.int64] | None) -> bool:
+    """Whether the point field may jump at a face: some welded point's copies carry other
+    values (float32, as the GPU reads them); never with cell data."""
+    if canonical is None or mesh.cell_scalars is not None:
+        return False
+    values = np.asarray(mesh.scalars, dtype=np.float32)
+    return bool(np.any(values[canonical] != values))
 
 
 def _jumps(ids: NDArray[np.int32], rows: slice, mates: NDArray[np.int64], scalars: NDArray[np.float32]) -> NDArray[np.int32]:
