@@ -5,16 +5,16 @@ per hexahedron; FEM and CFD results come on unstructured meshes (TetGen, Gmsh, f
 SimVascular) with graded, stretched and boundary-layer cells. Besides the SimVascular
 pipe and beam of ``../shared/data`` (``_common.REAL_MESHES``), this module makes:
 
-* ``torus by fTetWild``: a torus filled by fTetWild (:func:`tetvr.mesh.meshing.tetrahedralize`,
-  ~200k tets), a swirling field on it -- the curved-surface mesh a user gets from a CAD or
-  STL surface;
+* ``torus by fTetWild``: a torus filled by fTetWild (:func:`tetvr.mesh.meshing.tetrahedralize`)
+  at three target edge lengths (~200k, ~1M and ~3M tets), a swirling field on it -- the
+  curved-surface mesh a user gets from a CAD or STL surface;
 * ``boundary layer``: a pipe whose points crowd towards the wall in a geometric boundary
   layer (first layer 0.2 % of the radius, growth 1.25: cells ~50:1 at the wall),
   joined by a Delaunay tetrahedralisation (``scipy.spatial.Delaunay``; the points jittered
   by 5 % of the thinnest layer, or a tenth of the cells come out flat), with a developing
   pipe-flow profile and a wake -- the graded, stretched cells of a CFD mesh (~920k tets).
 
-The torus takes ~10 min to make on two cores (the pipe ~10 s), so each is kept in a cache
+The tori take minutes to make on two cores (the pipe ~10 s), so each is kept in a cache
 folder (``$TETVR_BENCH_CACHE``, else ``~/.cache/tetvr/bench``) as ``.npz`` and made again
 only when it is missing. Neither is shipped: both are made from code here.
 
@@ -23,6 +23,7 @@ only when it is missing. Neither is shipped: both are made from code here.
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import os
 import sys
@@ -39,6 +40,9 @@ from tetvr.mesh.tetmesh import TetMesh  # noqa: E402
 
 #: fTetWild's target edge for the torus (major radius 1, minor 0.35): ~200k tets.
 TORUS_EDGE = 0.048
+#: The finer tori's target edges and names: ~1M and ~3M tets (the cell count goes as the
+#: edge's inverse cube).
+FINE_TORI = {"1M": 0.0286, "3M": 0.0198}
 #: The boundary-layer pipe's points around each ring and rings along it (~920k tets).
 PIPE_AROUND, PIPE_ALONG = 64, 80
 
@@ -72,17 +76,18 @@ def _swirl(p: np.ndarray) -> np.ndarray:
     return np.sin(3.0 * theta + phi) * (0.5 + np.hypot(r, p[:, 2]) / 0.35) + 0.3 * np.cos(2.0 * theta)
 
 
-def torus_tetwild() -> TetMesh:
-    """A torus filled by fTetWild, ~200k tets (cached)."""
+def torus_tetwild(edge: float = TORUS_EDGE) -> TetMesh:
+    """A torus filled by fTetWild with target edge ``edge`` (by default ~200k tets; cached)."""
     def make() -> TetMesh:
         import trimesh
 
         from tetvr.mesh.meshing import tetrahedralize
 
         surface = trimesh.creation.torus(major_radius=1.0, minor_radius=0.35, major_sections=96, minor_sections=48)
-        return tetrahedralize(surface, edge_length=TORUS_EDGE, field=_swirl, scalar_name="swirl").mesh
+        return tetrahedralize(surface, edge_length=edge, field=_swirl, scalar_name="swirl",
+                              max_cells=10**8).mesh
 
-    return _cached(f"torus_tetwild_{TORUS_EDGE:g}", make)
+    return _cached(f"torus_tetwild_{edge:g}", make)
 
 
 def boundary_layer() -> TetMesh:
@@ -98,6 +103,8 @@ def meshes() -> list[tuple[str, Callable[[], TetMesh]]]:
     out: list[tuple[str, Callable[[], TetMesh]]] = []
     if all(importlib.util.find_spec(m) is not None for m in ("pytetwild", "trimesh")):
         out.append(("torus by fTetWild (swirl)", torus_tetwild))
+        out.extend((f"torus by fTetWild, {size} (swirl)", functools.partial(torus_tetwild, edge))
+                   for size, edge in FINE_TORI.items())
     if importlib.util.find_spec("scipy") is not None:
         out.append(("boundary layer (velocity)", boundary_layer))
     return out

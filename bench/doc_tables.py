@@ -56,7 +56,7 @@ def methods_vs_vtk(name: str = "vs_vtk.json") -> str:
                     f"| {v['vtk_pt'] * 1e3:.0f} | {s['tetvr']:.2f} | {s['tetvr_projected']:.2f} |{extra}"
                     f" {p['tetvr']['exact']:.1f} | {p['tetvr_projected']['exact']:.1f} | {p['vtk_pt']['exact']:.1f} |")
     size = "x".join(str(x) for x in r["size"])
-    return (f"{size}; default: `method=\"auto\"` (tet marching unless the scene needs projected tetrahedra, see above); "
+    return (f"{size}; default: `method=\"auto\"` (tet marching unless the scene needs projected tetrahedra or the cost model predicts them clearly faster, see above); "
             f"median of {r['repeats']} view changes, frames in turn, {r.get('gl_renderer', '?')}, "
             f"VTK {r.get('vtk_version', '?')}; PSNR (dB) of premultiplied RGB against the exact reference "
             f"({r['date']}, `bench/results/{name}`).\n\n" + "\n".join(rows))
@@ -795,7 +795,30 @@ def grazing() -> str:
             f"({r['date'][:10]}, `bench/results/grazing.json`).\n\n" + "\n".join(rows))
 
 
-TABLES: dict[str, Callable[[], str]] = {"imperfect_meshes": imperfect_meshes, "frame_memory": frame_memory, "marching_memory": marching_memory, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
+def cost_model() -> str:
+    """``auto``'s cost model on each corpus scene and the held-out ones (bench/cost_model.py):
+    measured and predicted ratio of the methods, what auto takes and its loss."""
+    r = _load("cost_model.json")
+    rows = ["| scene | size | tets | tet marching ms | projected ms | projected / marching, measured | predicted "
+            "| auto takes | slower than the faster by |",
+            "|---|---:|---:|---:|---:|---:|---:|---|---:|"]
+    for tag, scenes in (("", r["scenes"]), (" (held out)", r["held_out"])):
+        for m in scenes:
+            t, p = m["measured_s"], m["predicted_s"]
+            rows.append(f"| {m['name']}{tag} | {m['size'][0]} | {m['tets']:,} | {t['raymarch'] * 1e3:.0f} "
+                        f"| {t['projected'] * 1e3:.0f} | {t['projected'] / t['raymarch']:.2f} "
+                        f"| {p['projected'] / p['raymarch']:.2f} "
+                        f"| {'tet marching' if m['auto'] == 'raymarch' else 'projected tetrahedra'} "
+                        f"| {m['auto_loss']:.0%} |")
+    c = r["llvmpipe_ns"]
+    return (f"Coefficients (ns): tet marching {c['march_ns_per_segment']:g} a segment, {c['march_ns_per_ray']:g} "
+            f"an entering ray, {c['march_ns_per_tet']:g} a tet; projected tetrahedra {c['projected_ns_per_tet']:g} "
+            f"a tet, {c['projected_ns_per_fragment']:g} a fragment, {c['projected_ns_per_frame'] / 1e6:g} ms a "
+            f"frame; margin {r['auto_margin']:g}; fitted on `{'`, `'.join(r['runs'])}` "
+            f"(`bench/results/cost_model.json`).\n\n" + "\n".join(rows))
+
+
+TABLES: dict[str, Callable[[], str]] = {"cost_model": cost_model, "imperfect_meshes": imperfect_meshes, "frame_memory": frame_memory, "marching_memory": marching_memory, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
                                         "compare_demo": compare_demo,
                                         "viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "methods_vs_vtk_1024": methods_vs_vtk_1024, "methods_vs_vtk_inside": methods_vs_vtk_inside, "raymarch_stages": raymarch_stages,
                                         "volume_accuracy": volume_accuracy,

@@ -75,6 +75,7 @@ from tetvr.mesh import synthetic  # noqa: E402
 from tetvr.core.image import psnr, rmse, write_png  # noqa: E402
 from tetvr.mesh.tetmesh import TetMesh  # noqa: E402
 from tetvr.reference.tets import render_reference  # noqa: E402
+from tetvr.order.method import choose  # noqa: E402
 from tetvr.render import default_transfer_function  # noqa: E402
 from tetvr.settings import RenderSettings  # noqa: E402
 from tetvr.apps.vtkcompare import orbit, quantize8, tile_images  # noqa: E402
@@ -156,6 +157,8 @@ def _make(key: str, mesh: TetMesh, tf: Any, size: tuple[int, int]) -> Any:
         return _Tetvr(RenderSettings(), quantize=False)
     if key == "tetvr_projected":
         return _Tetvr(RenderSettings(method="projected"), quantize=False)
+    if key == "tetvr_march":
+        return _Tetvr(RenderSettings(method="raymarch"), quantize=False)
     if key == "tetvr_parity":
         return _Tetvr(PARITY_SETTINGS, quantize=True)
     return _Vtk(mesh, tf, size)
@@ -168,14 +171,18 @@ def bench_mesh(name: str, mesh: TetMesh, size: tuple[int, int], ref_size: tuple[
     rec: dict[str, Any] = {"name": name, "n_tets": mesh.n_tets, "n_points": mesh.n_points,
                            "scalars": mesh.scalar_name, "max_edge": mesh.max_edge,
                            "camera": cam0.to_dict(), "transfer_function": tf.to_dict()}
+    # What "auto" takes for each timed view; where it is not tet marching, that is timed too.
+    cams = [orbit(cam0, step * (i + 1)) for i in range(repeats + 1)]
+    rec["auto_method"] = [choose(RenderSettings(), mesh, cam, size) for cam in cams[1:]]
+    keys = RENDERERS + (("tetvr_march",) if set(rec["auto_method"]) != {"raymarch"} else ())
     renderers: dict[str, Any] = {}
     first: dict[str, float] = {}
     images: dict[str, np.ndarray] = {}
-    samples: dict[str, list[float]] = {k: [] for k in RENDERERS}
-    cpu: dict[str, list[float]] = {k: [] for k in RENDERERS}
+    samples: dict[str, list[float]] = {k: [] for k in keys}
+    cpu: dict[str, list[float]] = {k: [] for k in keys}
     try:
         # First frame: creation, upload, table / colour mapping, first sort and draw.
-        for key in RENDERERS:
+        for key in keys:
             t0 = time.perf_counter()
             renderers[key] = _make(key, mesh, tf, size)
             images[key] = renderers[key].frame(mesh, cam0, tf, size)
@@ -183,9 +190,8 @@ def bench_mesh(name: str, mesh: TetMesh, size: tuple[int, int], ref_size: tuple[
             if key == "vtk_pt":  # from the window's creation, in the VTK process
                 first[key] = renderers[key].renderer.first_seconds
         # Warm-up view change, then R timed view changes, renderers in turn.
-        for i in range(repeats + 1):
-            cam = orbit(cam0, step * (i + 1))
-            for key in RENDERERS:
+        for i, cam in enumerate(cams):
+            for key in keys:
                 c0, t0 = time.process_time(), time.perf_counter()
                 renderers[key].frame(mesh, cam, tf, size)
                 wall = time.perf_counter() - t0
@@ -196,7 +202,7 @@ def bench_mesh(name: str, mesh: TetMesh, size: tuple[int, int], ref_size: tuple[
                     if key != "vtk_pt":  # the VTK process's CPU time is not this process's
                         cpu[key].append((time.process_time() - c0) / wall)
         if ref_size != size:  # accuracy images at the reference's size
-            for key in RENDERERS:
+            for key in keys:
                 renderers[key].release()
                 renderers[key] = _make(key, mesh, tf, ref_size)
                 images[key] = renderers[key].frame(mesh, cam0, tf, ref_size)
@@ -216,11 +222,11 @@ def bench_mesh(name: str, mesh: TetMesh, size: tuple[int, int], ref_size: tuple[
     rec["view_change_median_s"] = med
     rec["view_change_samples_s"] = samples
     rec["cpu_utilisation"] = {k: float(statistics.median(v)) for k, v in cpu.items() if v}
-    rec["speedup_vs_vtk_pt"] = {k: med["vtk_pt"] / med[k] for k in RENDERERS}
-    rec["psnr"] = {k: {o: psnr(images[k], r) for o, r in refs.items()} for k in RENDERERS}
-    rec["rmse"] = {k: {o: rmse(images[k], r) for o, r in refs.items()} for k in RENDERERS}
+    rec["speedup_vs_vtk_pt"] = {k: med["vtk_pt"] / med[k] for k in keys}
+    rec["psnr"] = {k: {o: psnr(images[k], r) for o, r in refs.items()} for k in keys}
+    rec["rmse"] = {k: {o: rmse(images[k], r) for o, r in refs.items()} for k in keys}
     rec["psnr_parity_vs_vtk_pt"] = psnr(images["tetvr_parity"], images["vtk_pt"])
-    rec["first_frame_vs_vtk_pt"] = {k: first["vtk_pt"] / first[k] for k in RENDERERS}
+    rec["first_frame_vs_vtk_pt"] = {k: first["vtk_pt"] / first[k] for k in keys}
     rec["target"] = target(name, mesh.n_tets, size, rec)
     pics = {"reference": refs["exact"], **images}
     return rec, pics
@@ -487,6 +493,25 @@ def _anatomy_picture(refs: dict[str, np.ndarray], vtk: np.ndarray, ours: np.ndar
     write_png(tile_images(tiles, cols=4), path, background=(0, 0, 0))
 
 
+def _slug(name: str) -> str:
+    """A mesh's picture name: its first word, and its size where the name gives one
+    (``"torus by fTetWild, 1M (swirl)"`` -> ``torus_1M``)."""
+    words = [name.split(" ")[0]] + ([name.split(", ")[1].split(" ")[0]] if ", " in name else [])
+    return "_".join("".join(c if c.isalnum() else "_" for c in w).strip("_") for w in words)
+
+
+def _merged(old: dict[str, Any], new: dict[str, Any], rerun: list[str]) -> dict[str, Any]:
+    """``new``'s header with ``old``'s meshes but those rerun; a note says which meshes
+    come from which run."""
+    kept = [m for m in old["meshes"] if m["name"] not in rerun]
+    for m in kept:
+        m.setdefault("date", old["date"])
+    notes = [n for n in old.get("notes", []) if not n.startswith("merged:")]
+    notes.append(f"merged: {', '.join(rerun)} rerun on {new['date']} into the run of {old['date']} "
+                 "(each mesh's frames are taken in turn within its own run; see each record's date)")
+    return {**new, "notes": [*new["notes"], *notes], "meshes": kept}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help=f"meshes <= {QUICK_MAX_TETS} tets, 3 repeats")
@@ -496,6 +521,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--step", type=float, default=3.0, help="degrees the camera turns per frame")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
     ap.add_argument("--no-inside", action="store_true", help="leave out the views from inside the meshes")
+    ap.add_argument("--only", nargs="+", default=None, metavar="NAME",
+                    help="run only the meshes whose names contain one of these, and put their records in "
+                         "place of those in the existing JSON (each record has its own date and load)")
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
     ap.add_argument("--anatomy", action="store_true",
                     help="instead: split VTK's error into its causes (bluntfin, or cube(20) without the data), "
@@ -523,6 +551,8 @@ def main(argv: list[str] | None = None) -> int:
     size = (args.size, args.size)
     ref_size = (args.ref_size or args.size,) * 2
     specs, notes = _mesh_specs(args.quick, args.data)
+    if args.only:
+        specs = [(name, load) for name, load in specs if any(o in name for o in args.only)]
     with tetvr.Renderer() as r:
         gl = r.gl_info.get("GL_RENDERER", "")
     res: dict[str, Any] = {
@@ -539,15 +569,20 @@ def main(argv: list[str] | None = None) -> int:
     suffix = "" if args.size == 512 else f"_{args.size}"  # 512x512 is the main table's size
     out_json = args.out / f"vs_vtk{suffix}.json"
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.only and out_json.exists():
+        res = _merged(json.loads(out_json.read_text()), res, [name for name, _ in specs])
+    order = [name for name, _ in _mesh_specs(args.quick, args.data)[0]]
     try:
         for name, load in specs:
             mesh = load()
             print(f"{name}: {mesh.n_tets} tets ...", flush=True)
+            start = {"date": _dt.datetime.now().isoformat(timespec="seconds"), "loadavg_start": loadavg()}
             rec, pics = bench_mesh(name, mesh, size, ref_size, repeats, args.step)
             if not args.no_inside:
                 rec["inside"] = bench_inside(mesh, default_transfer_function(mesh, opacity=OPACITY), size, repeats)
-            res["meshes"].append(rec)
-            slug = "".join(c if c.isalnum() else "_" for c in name.split(" ")[0]).strip("_")
+            res["meshes"].append({**start, **rec})
+            res["meshes"].sort(key=lambda m: order.index(m["name"]) if m["name"] in order else len(order))
+            slug = _slug(name)
             _picture(pics, args.out / f"vs_vtk_{slug}{suffix}.png")
             write_json(out_json, res)
             del mesh, pics
