@@ -175,10 +175,10 @@ def compare_demo() -> str:
             f"{r['vtk'].get('status', '')} (`bench/results/compare_demo/comparison.json`).\n\n" + "\n".join(rows))
 
 
-def raymarch_stages() -> str:
+def raymarch_stages(name: str = "stages.json") -> str:
     """The ray caster's stages and cost per segment beside projected tetrahedra's frame
     (bench/stages.py)."""
-    r = _load("stages.json")
+    r = _load(name)
     rows = ["| mesh | tets | entry ms | march ms | frame ms | segments per tet | ns per segment (march) "
             "| layers | projected tetrahedra ms | projected / marching |",
             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
@@ -193,7 +193,12 @@ def raymarch_stages() -> str:
                     f"| {m['wall_median']['tet_unprofiled'] * 1e3:.0f} | {rm['speedup_vs_projected']:.2f} |")
     size = "x".join(str(x) for x in r["size"])
     return (f"{size}, `Camera.fit`, median of the repeats, wall time without per-stage waits "
-            f"({r['timestamp']}, `bench/results/stages.json`).\n\n" + "\n".join(rows))
+            f"({r['timestamp']}, `bench/results/{name}`).\n\n" + "\n".join(rows))
+
+
+def raymarch_stages_1024() -> str:
+    """:func:`raymarch_stages` at 1024x1024 (``bench/stages.py --size 1024``)."""
+    return raymarch_stages("stages_1024.json")
 
 
 def spiky_tf() -> str:
@@ -820,7 +825,7 @@ def cost_model() -> str:
 
 TABLES: dict[str, Callable[[], str]] = {"cost_model": cost_model, "imperfect_meshes": imperfect_meshes, "frame_memory": frame_memory, "marching_memory": marching_memory, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
                                         "compare_demo": compare_demo,
-                                        "viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "methods_vs_vtk_1024": methods_vs_vtk_1024, "methods_vs_vtk_inside": methods_vs_vtk_inside, "raymarch_stages": raymarch_stages,
+                                        "viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "methods_vs_vtk_1024": methods_vs_vtk_1024, "methods_vs_vtk_inside": methods_vs_vtk_inside, "raymarch_stages": raymarch_stages, "raymarch_stages_1024": raymarch_stages_1024,
                                         "volume_accuracy": volume_accuracy,
                                         "spiky_tf": spiky_tf, "degenerate": degenerate, "grazing": grazing,
                                         "distributed_series": distributed_series,

@@ -188,6 +188,15 @@ def vs_vtk_pixels() -> str:
             f"{len(pairs)} meshes measured at both (`bench/results/vs_vtk.json`, `vs_vtk_1024.json`)")
 
 
+def march_lanes() -> str:
+    """bench/README.md: how evenly the rays of a pixel block walk (bench/stages.py)."""
+    r = _load(RESULTS / "stages.json")
+    u = sorted(m["raymarch"]["lane_utilisation"] for m in r["meshes"] if "lane_utilisation" in m.get("raymarch", {}))
+    return (f"in 4x4 blocks the rays walk {u[0]:.0%}–{u[-1]:.0%} of what the blocks' longest rays do "
+            f"(median {statistics.median(u):.0%}, the {len(u)} meshes of `stages.py` at "
+            f"{r['size'][0]}x{r['size'][1]})")
+
+
 def view_change_missed(m: dict[str, Any]) -> bool:
     """Whether a mesh of bench/vs_vtk.py missed its view-change target (where one applies)."""
     t = m["target"]
@@ -312,7 +321,7 @@ def VALUES() -> dict[str, Callable[[], str]]:  # noqa: N802 - read like the TABL
         "table_filter": table_filter, "smooth_tf_psnr": smooth_tf_psnr, "framebuffer_vs_table": framebuffer_vs_table,
         "auto_table_sizes": auto_table_sizes, "table_build": table_build, "scalar_bins_auto": scalar_bins_auto,
         "align_nodes": align_nodes, "slices_vs_fixed": slices_vs_fixed, "centroid_sort": centroid_sort,
-        "large_meshes": large_meshes, "vs_vtk_pixels": vs_vtk_pixels, "vs_vtk_missed": vs_vtk_missed,
+        "large_meshes": large_meshes, "vs_vtk_pixels": vs_vtk_pixels, "march_lanes": march_lanes, "vs_vtk_missed": vs_vtk_missed,
         "spiky_even": spiky_even, "rings_bricks": rings_bricks,
         "anatomy_own": anatomy_own, "anatomy_convention": anatomy_convention, "anatomy_colour": anatomy_colour,
         "install_time": install_time, "extras_sizes": extras_sizes, "notebook_times": notebook_times}

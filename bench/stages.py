@@ -219,6 +219,16 @@ def bench_mesh(renderer: Any, name: str, mesh: TetMesh, repeats: int, bar: tqdm)
     return rec
 
 
+def lane_utilisation(counts: np.ndarray, block: int = 4) -> float:
+    """The segments rays walk over what blocks of ``block`` x ``block`` pixels walk when
+    each pixel runs as long as its block's longest ray (llvmpipe shades a block together),
+    over the blocks any ray enters: 1 where neighbouring rays cross as many cells."""
+    h, w = (counts.shape[0] // block) * block, (counts.shape[1] // block) * block
+    g = counts[:h, :w].reshape(h // block, block, w // block, block).swapaxes(1, 2).reshape(-1, block * block)
+    longest = g.max(axis=1)
+    return float(g.sum() / max(int(longest.sum()) * block * block, 1))
+
+
 def bench_raymarch(renderer: Any, mesh: TetMesh, repeats: int) -> dict[str, Any]:
     """The ray caster on the same mesh and view: first frame (records and boundary faces),
     per-view stages (entry passes, march passes, readback), and the cost per segment."""
@@ -250,6 +260,7 @@ def bench_raymarch(renderer: Any, mesh: TetMesh, repeats: int) -> dict[str, Any]
     rec["segments"] = int(counts.sum())
     rec["segments_per_covered_pixel"] = float(counts[counts > 0].mean()) if counts.any() else 0.0
     rec["segments_per_tet"] = rec["segments"] / mesh.n_tets
+    rec["lane_utilisation"] = lane_utilisation(counts)
     rec["ns_per_segment"] = {"march_wall": rec["median"]["march"] / max(rec["segments"], 1) * 1e9,
                              "frame_cpu": rec["median"]["cpu"] / max(rec["segments"], 1) * 1e9}
     rec["samples"] = {"rows": rows, "wall": walls}
@@ -500,18 +511,31 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=None, help="frames per mesh after warm-up (default 5, 3 with --quick)")
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder with the real .vtu meshes")
     ap.add_argument("--replot", action="store_true", help="only draw the chart again from the JSON in --out")
+    ap.add_argument("--size", type=int, default=SIZE[0],
+                    help=f"frame size (square; default {SIZE[0]}); another size writes stages_<size>.json and "
+                         "leaves out the table and sort parts")
+    ap.add_argument("--only", nargs="+", default=None, metavar="NAME",
+                    help="run only the meshes whose names contain one of these and put their records in place of "
+                         "those in the existing JSON (the table and sort parts are kept from it)")
     args = ap.parse_args(argv)
+    suffix = "" if args.size == SIZE[0] else f"_{args.size}"
+    json_path, png_path = args.out / f"stages{suffix}.json", args.out / f"stages{suffix}.png"
+    if suffix:
+        globals()["SIZE"] = (args.size, args.size)  # the size every stage renders at
     if args.replot:
-        plot(json.loads((args.out / "stages.json").read_text()), args.out / "stages.png")
+        plot(json.loads(json_path.read_text()), png_path)
         return 0
     repeats = args.repeats or (3 if args.quick else 5)
     if repeats < 1:
         ap.error("--repeats must be >= 1")
-    json_path, png_path = args.out / "stages.json", args.out / "stages.png"
 
     from tetvr.gl.renderer import Renderer
 
     specs, notes = _mesh_specs(args.quick, args.data)
+    order = [name for name, _, _ in specs]
+    old = json.loads(json_path.read_text()) if args.only and json_path.exists() else None
+    if args.only:
+        specs = [spec for spec in specs if any(o in spec[0] for o in args.only)]
     res: dict[str, Any] = {
         "timestamp": _dt.datetime.now().astimezone().isoformat(timespec="seconds"),
         "command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
@@ -535,9 +559,18 @@ def main(argv: list[str] | None = None) -> int:
             "raymarch": ("the tet-marching ray caster (method='raymarch') on the same mesh and view: stage medians "
                          "(entry: boundary passes; march: the walks), wall_median without profiling, segments: "
                          "ray-tet segments walked per frame, ns_per_segment: march time (and frame CPU time) "
-                         "per segment; speedup_vs_projected: projected wall / ray caster wall"),
+                         "per segment; speedup_vs_projected: projected wall / ray caster wall; "
+                         "lane_utilisation: segments walked over what 4x4 pixel blocks walk at their longest ray's "
+                         "count"),
         },
     }
+    if old is not None:
+        rerun = [name for name, _, _ in specs]
+        res["meshes"] = [m for m in old["meshes"] if m["name"] not in rerun]
+        for m in res["meshes"]:
+            m.setdefault("date", old["timestamp"])
+        res["notes"] = [*notes, *(n for n in old.get("notes", []) if not n.startswith("merged:")),
+                        f"merged: {', '.join(rerun)} rerun on {res['timestamp']} into the run of {old['timestamp']}"]
     n_frames = sum(3 + 4 * (min(repeats, BIG_REPEATS) if t > BIG_TETS else repeats) for _, t, _ in specs)
     total_work = 1 + n_frames + len(TABLE_BINS) * TABLE_REPEATS + 1 + SORT_REPEATS
     big_mesh: TetMesh | None = None
@@ -567,24 +600,31 @@ def main(argv: list[str] | None = None) -> int:
                 if expected < 0:  # size was unknown when the bar was sized
                     bar.total += 4 * r - 4 * repeats
                 bar.set_description(f"{name} {_label(mesh.n_tets)}")
+                start = _dt.datetime.now().astimezone().isoformat(timespec="seconds")
                 rec = bench_mesh(renderer, name, mesh, r, bar)
-                rec["load_s"] = load_s
+                rec["load_s"], rec["date"] = load_s, start
                 bar.set_description(f"{name} ray caster")
                 rec["raymarch"] = bench_raymarch(marcher, mesh, r)
                 rec["raymarch"]["speedup_vs_projected"] = (rec["wall_median"]["tet_unprofiled"]
                                                            / rec["raymarch"]["wall_median"])
                 res["meshes"].append(rec)
+                res["meshes"].sort(key=lambda m: order.index(m["name"]) if m["name"] in order else len(order))
                 res["targets"] = evaluate_targets(res)
                 write_json(json_path, res)
                 if mesh.n_tets == 6 * SORT_N**3:
                     big_mesh = mesh
                 del mesh
-        bar.set_description("table build")
-        res["table"] = bench_tables(TABLE_REPEATS, bar)
-        res["targets"] = evaluate_targets(res)
-        write_json(json_path, res)
-        bar.set_description("centroid sort 1M")
-        res["sort"] = bench_sort(big_mesh, SORT_REPEATS, bar)
+        if old is not None:  # the table and sort parts of the run merged into
+            res["table"], res["sort"] = old.get("table"), old.get("sort")
+        elif suffix:
+            notes.append(f"at {args.size}x{args.size}: the table and sort parts are in stages.json")
+        else:
+            bar.set_description("table build")
+            res["table"] = bench_tables(TABLE_REPEATS, bar)
+            res["targets"] = evaluate_targets(res)
+            write_json(json_path, res)
+            bar.set_description("centroid sort 1M")
+            res["sort"] = bench_sort(big_mesh, SORT_REPEATS, bar)
         res["complete"] = True
     except KeyboardInterrupt:
         res["interrupted"] = True

@@ -28,9 +28,10 @@ if TYPE_CHECKING:
     from tetvr.core.camera import Camera
     from tetvr.mesh.tetmesh import TetMesh
 
-__all__ = ["choose", "segments_per_tet", "entering_rays", "predicted_seconds", "order_exact", "CostModel", "LLVMPIPE", "AUTO_MARGIN",
-           "RAYMARCH_ONLY", "PROJECTED_ONLY", "AUTO_MAX_TETS", "MARCH_BYTES_PER_TET", "MARCH_MEMORY_SHARE",
-           "march_fits"]
+__all__ = ["choose", "segments_per_tet", "entering_rays", "predicted_seconds", "order_exact", "CostModel",
+           "LLVMPIPE", "AUTO_MARGIN", "RAYMARCH_ONLY", "PROJECTED_ONLY", "AUTO_MAX_TETS", "MARCH_BYTES_PER_TET",
+           "MARCH_MEMORY_SHARE", "march_fits"]
+
 
 @dataclasses.dataclass(frozen=True)
 class CostModel:
