@@ -26,7 +26,7 @@ premultiplied RGB; also against the reference in VTK's own convention (``optics=
 which shows how well each one does what it sets out to do.
 
 The meshes: the cubes and the data's meshes above, and the unstructured meshes of
-``bench/corpus.py`` (a torus fTetWild fills at ~200k, ~1M and ~3M tets, a Delaunay pipe
+``bench/corpus.py`` (a torus fTetWild fills at ~200k and ~1M tets, a Delaunay pipe
 with a graded boundary layer; made once and cached, not with ``--quick``). ``--only NAME``
 reruns the meshes whose names contain NAME and puts their records in place of those in
 the existing JSON (each record carries its own date and load average).

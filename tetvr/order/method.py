@@ -77,10 +77,11 @@ LLVMPIPE = CostModel(march_ns_per_segment=13.2, march_ns_per_ray=208.0, march_ns
                      projected_ns_per_frame=24.7e6)
 #: "auto" takes projected tetrahedra for speed only where the model predicts them this
 #: much faster. The model errs most on projected tetrahedra, whose cost per fragment
-#: depends on the view (16-38 ns measured: 2.6x the prediction from close by, the
-#: held-out scenes of bench/results/cost_model.json), and they are the less accurate
-#: method on real meshes at large sizes (the beam at 1024x1024: largest error 2.1e-3
-#: against tet marching's 7.3e-5), so a near tie goes to tet marching.
+#: depends on the view (the held-out close perspective of bench/results/cost_model.json:
+#: predicted the faster, measured more than twice as slow), and they are the less
+#: accurate method on real meshes at large sizes (bench/results/speed_accuracy.json, the
+#: beam at 1024x1024: their largest error ten times tet marching's), so a near tie goes to
+#: tet marching.
 AUTO_MARGIN = 1.5
 #: Host memory tet marching takes per tet for a mesh's first frame on llvmpipe, which keeps
 #: GL textures in host memory: the records, the face adjacency and its temporaries
