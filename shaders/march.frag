@@ -425,13 +425,18 @@ void main() {
         if (ended) break;
         k = exit_face;
         link = tet_link(tet, k);
+        // The exit face's three points, in slots k + 1, k + 2, k + 3.
+        face_across(tet_ids(tet), k, ow, e1, e2, d, inv_dd, sa, sb, sc, pa, pb, pc, ts, ss, E);
         ended = link.x < 0;
         if (link.x < 0) {
+            // Out of the mesh by a face the ray clearly does not pass through, seen across
+            // it: the nearest of planes that nearly coincide (a sliver at the hull seen
+            // face-on, entered beside an edge), where a face into the mesh was the exit.
+            // The ray would lose its chord through the mesh: traced again.
+            if (min(E.x, min(E.y, E.z)) < -CLEAR_ENTRY * (abs(E.x) + abs(E.y) + abs(E.z))) suspect(px);
             status = STATUS_REENTER;
             break;
         }
-        // The exit face's three points, in slots k + 1, k + 2, k + 3.
-        face_across(tet_ids(tet), k, ow, e1, e2, d, inv_dd, sa, sb, sc, pa, pb, pc, ts, ss, E);
         if (min(E.x, min(E.y, E.z)) >= 0.0 || step == PLANE_STEPS - 1) {
             by_points = true;
             break;
