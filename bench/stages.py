@@ -312,7 +312,7 @@ def evaluate_targets(res: dict[str, Any]) -> dict[str, Any]:
     if sort:
         v = sort["median"]
         out["sort_1m_s"] = {**TARGETS["sort_1m_s"], "value": v, "pass": v <= TARGETS["sort_1m_s"]["limit"]}
-    tab = res.get("table", {}).get("by_bins", {}).get("256")
+    tab = (res.get("table") or {}).get("by_bins", {}).get("256")
     if tab:
         v = tab["median"]
         out["table_256_s"] = {**TARGETS["table_256_s"], "value": v, "pass": v <= TARGETS["table_256_s"]["limit"]}
@@ -439,7 +439,7 @@ def plot(res: dict[str, Any], path: Path) -> None:
 
     # (c) table build vs bins.
     ax = axes[1, 0]
-    tab = res.get("table", {}).get("by_bins", {})
+    tab = (res.get("table") or {}).get("by_bins", {})
     if tab:
         ns = np.array([int(k) for k in tab])
         ts = np.array([v["median"] for v in tab.values()])
@@ -574,7 +574,8 @@ def main(argv: list[str] | None = None) -> int:
         for m in res["meshes"]:
             m.setdefault("date", old["timestamp"])
         res["notes"] = [*notes, *(n for n in old.get("notes", []) if not n.startswith("merged:")),
-                        f"merged: {', '.join(rerun)} rerun on {res['timestamp']} into the run of {old['timestamp']}"]
+                        f"merged: {', '.join(rerun)} rerun on {res['timestamp']}; the other meshes' records keep "
+                        "the dates of their runs"]
     n_frames = sum(3 + 4 * (min(repeats, BIG_REPEATS) if t > BIG_TETS else repeats) for _, t, _ in specs)
     total_work = 1 + n_frames + len(TABLE_BINS) * TABLE_REPEATS + 1 + SORT_REPEATS
     big_mesh: TetMesh | None = None

@@ -512,8 +512,8 @@ def _merged(old: dict[str, Any], new: dict[str, Any], rerun: list[str]) -> dict[
     for m in kept:
         m.setdefault("date", old["date"])
     notes = [n for n in old.get("notes", []) if not n.startswith("merged:")]
-    notes.append(f"merged: {', '.join(rerun)} rerun on {new['date']} into the run of {old['date']} "
-                 "(each mesh's frames are taken in turn within its own run; see each record's date)")
+    notes.append(f"merged: {', '.join(rerun)} rerun on {new['date']}; the other meshes' records keep the dates "
+                 "of their runs (each mesh's frames are taken in turn within its own run)")
     return {**new, "notes": [*new["notes"], *notes], "meshes": kept}
 
 

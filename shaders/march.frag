@@ -355,6 +355,7 @@ void main() {
     acc.x = min(acc.x, t_in);
 #endif
     COPIES_OF(tet);
+    float t_entry = t_in;  // where this pass's walk entered the mesh
 
     // The walk by points (Marmitt & Slusallek 2006) sees the points in the plane across the
     // ray, the ray at its origin: the face the ray came in by is a triangle (a, b, c)
@@ -583,6 +584,13 @@ void main() {
                 t_next = t;
                 f_last = nb[i];
             }
+        }
+        // A walk that made no way (it left the mesh where it entered) and would enter again
+        // where it left: faces that coincide, entered in turn without end (flat slivers at
+        // the hull, each face an entry). Traced again instead of walked pass after pass.
+        if (f_last >= 0 && (t_out - t_entry) * per_t < u_slack && (t_next - t_out) * per_t < u_slack) {
+            suspect(px);
+            f_last = -1;
         }
         if (f_last >= 0) atomicAdd(u_more, 1u);
         else status = STATUS_DONE;
