@@ -53,36 +53,44 @@ MARCH_TERMS = ("segments", "rays", "tets")
 PROJECTED_TERMS = ("tets", "segments", "frame")
 
 
+def _row(name: str, mesh: Any, cams: list[Camera], size: tuple[int, int],
+         measured: dict[str, float]) -> dict[str, Any]:
+    """A scene's row: the model's inputs averaged over its timed views, and its times."""
+    return {"name": name, "size": list(size), "tets": mesh.n_tets,
+            "segments": float(np.mean([segments_per_tet(mesh, c, size) for c in cams]) * mesh.n_tets),
+            "rays": float(np.mean([entering_rays(mesh, c, size) for c in cams])),
+            "order_exact": order_exact(RenderSettings(), mesh), "measured_s": measured}
+
+
 def scene_rows(results: Path) -> list[dict[str, Any]]:
-    """One row per (mesh, size) timed by both methods: the model's inputs and the times."""
+    """One row per (mesh, size) timed by both methods: the model's inputs and the times
+    (each mesh loaded once for all the runs)."""
     import vs_vtk
     from tetvr.apps.vtkcompare import orbit
 
     loaders = dict(vs_vtk._mesh_specs(False, vs_vtk.DEFAULT_DATA)[0])
-    rows = []
+    timed: dict[str, list[tuple[dict[str, Any], dict[str, Any]]]] = {}
     for run in RUNS:
         res = json.loads((results / run).read_text())
-        size = tuple(res["size"])
         for m in res["meshes"]:
+            if m["name"] in loaders and "tetvr_projected" in m["view_change_median_s"]:
+                timed.setdefault(m["name"], []).append((res, m))
+    rows = []
+    for name, records in timed.items():
+        mesh = loaders[name]()
+        for res, m in records:
             times = m["view_change_median_s"]
-            if m["name"] not in loaders or "tetvr_projected" not in times:
-                continue
             march = times.get("tetvr_march", times["tetvr"] if set(m.get("auto_method", ["raymarch"])) == {"raymarch"}
                               else None)
             if march is None:
                 continue
-            mesh = loaders[m["name"]]()
-            cam0 = Camera.from_dict(m["camera"])
+            cam0, size = Camera.from_dict(m["camera"]), tuple(res["size"])
             cams = [orbit(cam0, res["step_deg"] * (i + 1)) for i in range(1, res["repeats"] + 1)]
-            rows.append({"name": m["name"], "size": list(size), "tets": mesh.n_tets,
-                         "segments": float(np.mean([segments_per_tet(mesh, c, size) for c in cams]) * mesh.n_tets),
-                         "rays": float(np.mean([entering_rays(mesh, c, size) for c in cams])),
-                         "order_exact": order_exact(RenderSettings(), mesh),
-                         "measured_s": {"raymarch": march, "projected": times["tetvr_projected"]}})
-            print(f"{m['name']} {size[0]}: {rows[-1]['segments']:.3g} segments, {rows[-1]['rays']:.3g} rays",
-                  flush=True)
-            del mesh
-    return rows
+            rows.append(_row(name, mesh, cams, size, {"raymarch": march, "projected": times["tetvr_projected"]}))
+            print(f"{name} {size[0]}: {rows[-1]['segments']:.3g} segments, {rows[-1]['rays']:.3g} rays", flush=True)
+        del mesh
+    order = list(timed)
+    return sorted(rows, key=lambda r: (r["size"][0], order.index(r["name"])))
 
 
 def held_out_scenes() -> list[tuple[str, Any, Camera, Any, tuple[int, int]]]:
@@ -126,11 +134,7 @@ def time_held_out(repeats: int = 5, step: float = 3.0) -> list[dict[str, Any]]:
         finally:
             for r in renderers.values():
                 r.release()
-        rows.append({"name": name, "size": list(size), "tets": mesh.n_tets,
-                     "segments": float(np.mean([segments_per_tet(mesh, c, size) for c in cams[1:]]) * mesh.n_tets),
-                     "rays": float(np.mean([entering_rays(mesh, c, size) for c in cams[1:]])),
-                     "order_exact": order_exact(RenderSettings(), mesh),
-                     "measured_s": {m: float(statistics.median(v)) for m, v in times.items()}})
+        rows.append(_row(name, mesh, cams[1:], size, {m: float(statistics.median(v)) for m, v in times.items()}))
         print(f"held out: {name} {size[0]}: {rows[-1]['measured_s']}", flush=True)
     return rows
 
