@@ -57,6 +57,19 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     os.replace(tmp, path)
 
 
+def kept_records(old: dict[str, Any], old_date: str, rerun: list[str], date: str,
+                 notes: list[str]) -> tuple[list[dict[str, Any]], list[str]]:
+    """For a run that reruns some meshes (``--only``) into ``old``'s JSON: ``old``'s mesh
+    records but those rerun, each keeping its run's date (``old_date`` where it has none),
+    and ``notes`` with ``old``'s, one saying what was rerun when."""
+    kept = [m for m in old["meshes"] if m["name"] not in rerun]
+    for m in kept:
+        m.setdefault("date", old_date)
+    return kept, [*notes, *(n for n in old.get("notes", []) if not n.startswith("merged:")),
+                  f"merged: {', '.join(rerun)} rerun on {date}; the other meshes' records keep the dates of their "
+                  "runs (each mesh's frames are taken in turn within its own run)"]
+
+
 def versions() -> dict[str, str]:
     """Python and the versions of numpy, tetvr, moderngl and matplotlib ("not installed" when missing)."""
     out = {"python": platform.python_version()}

@@ -45,6 +45,7 @@ from _common import (
     QUICK_MAX_TETS,
     REAL_MESHES,
     TETS_DATA,
+    kept_records,
     load_quiet,
     loadavg,
     machine,
@@ -569,13 +570,9 @@ def main(argv: list[str] | None = None) -> int:
         },
     }
     if old is not None:
-        rerun = [name for name, _, _ in specs]
-        res["meshes"] = [m for m in old["meshes"] if m["name"] not in rerun]
-        for m in res["meshes"]:
-            m.setdefault("date", old["timestamp"])
-        res["notes"] = [*notes, *(n for n in old.get("notes", []) if not n.startswith("merged:")),
-                        f"merged: {', '.join(rerun)} rerun on {res['timestamp']}; the other meshes' records keep "
-                        "the dates of their runs"]
+        res["meshes"], res["notes"] = kept_records(old, old["timestamp"], [name for name, _, _ in specs],
+                                                   res["timestamp"], notes)
+        notes = res["notes"]  # what the run adds below goes with them
     n_frames = sum(3 + 4 * (min(repeats, BIG_REPEATS) if t > BIG_TETS else repeats) for _, t, _ in specs)
     total_work = 1 + n_frames + len(TABLE_BINS) * TABLE_REPEATS + 1 + SORT_REPEATS
     big_mesh: TetMesh | None = None

@@ -89,7 +89,7 @@ from tetvr.settings import PARITY_SETTINGS
 
 import corpus  # noqa: E402
 from _common import (  # noqa: E402
-    CUBE_NS, QUICK_MAX_TETS, REAL_MESHES, TETS_DATA, load_quiet, loadavg, machine, write_json,
+    CUBE_NS, QUICK_MAX_TETS, REAL_MESHES, TETS_DATA, kept_records, load_quiet, loadavg, machine, write_json,
 )
 
 DEFAULT_DATA = TETS_DATA
@@ -505,18 +505,6 @@ def _slug(name: str) -> str:
     return "_".join("".join(c if c.isalnum() else "_" for c in w).strip("_") for w in words)
 
 
-def _merged(old: dict[str, Any], new: dict[str, Any], rerun: list[str]) -> dict[str, Any]:
-    """``new``'s header with ``old``'s meshes but those rerun; a note says which meshes
-    come from which run."""
-    kept = [m for m in old["meshes"] if m["name"] not in rerun]
-    for m in kept:
-        m.setdefault("date", old["date"])
-    notes = [n for n in old.get("notes", []) if not n.startswith("merged:")]
-    notes.append(f"merged: {', '.join(rerun)} rerun on {new['date']}; the other meshes' records keep the dates "
-                 "of their runs (each mesh's frames are taken in turn within its own run)")
-    return {**new, "notes": [*new["notes"], *notes], "meshes": kept}
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help=f"meshes <= {QUICK_MAX_TETS} tets, 3 repeats")
@@ -575,7 +563,9 @@ def main(argv: list[str] | None = None) -> int:
     out_json = args.out / f"vs_vtk{suffix}.json"
     args.out.mkdir(parents=True, exist_ok=True)
     if args.only and out_json.exists():
-        res = _merged(json.loads(out_json.read_text()), res, [name for name, _ in specs])
+        old = json.loads(out_json.read_text())
+        res["meshes"], res["notes"] = kept_records(old, old["date"], [name for name, _ in specs], res["date"],
+                                                   res["notes"])
     order = [name for name, _ in _mesh_specs(args.quick, args.data)[0]]
     try:
         for name, load in specs:
