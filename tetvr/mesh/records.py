@@ -73,6 +73,12 @@ RECORD_TEXELS = 5
 #: cross less than a quarter of a pixel's footprint before leaving through that plane
 #: at any larger sine.
 EDGE_ON_SINE = 1.0 / 64.0
+#: A boundary face counts as seen edge-on (:func:`rim_faces`) too where its projection is
+#: thinner than this, in pixels: a needle (a face of almost no area, whatever its plane
+#: says) or a face whose corners nearly line up seen from the eye. The rasteriser snaps
+#: corners to 1/256 pixel, which can turn such a triangle over or move a pixel centre
+#: across its long edge, and a pixel next to it then falls between the faces drawn.
+THIN_PIXELS = 1.0 / 64.0
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -110,6 +116,8 @@ class MarchRecords:
         one of them (``march.frag`` tests them as it tests the face it left by).
     boundary_planes : (F, 4) float64, ``planes`` of the boundary faces.
     boundary_spheres : (F, 4) float64, a sphere round each boundary face (centre, radius).
+    boundary_heights : (F,) float64, each boundary face's smallest height (twice its area
+        over its longest edge; 0 for a needle).
     origin : (3,) float64, the mesh's bounding-box centre.
     convex : the mesh fills a convex region (no ray enters twice).
     may_jump : some welded point's copies carry other float32 values (else no face jumps,
@@ -125,6 +133,7 @@ class MarchRecords:
     boundary_neighbors: NDArray[np.int32]
     boundary_planes: NDArray[np.float64]
     boundary_spheres: NDArray[np.float64]
+    boundary_heights: NDArray[np.float64]
     origin: NDArray[np.float64]
     convex: bool
     may_jump: bool = False
@@ -182,10 +191,14 @@ def march_records(mesh: TetMesh, *, cells: bool = True) -> MarchRecords:
     centres = tri.mean(axis=1)
     radii = np.sqrt(((tri - centres[:, None]) ** 2).sum(axis=-1)).max(axis=1)
     spheres = np.concatenate([centres, radii[:, None] * (1 + 1e-6)], axis=1)
+    edges = np.roll(tri, -1, axis=1) - tri
+    longest = np.sqrt((edges ** 2).sum(axis=-1)).max(axis=1)
+    area2 = np.sqrt((np.cross(edges[:, 0], edges[:, 1]) ** 2).sum(axis=-1))
+    heights = np.divide(area2, longest, out=np.zeros_like(area2), where=longest > 0)
     rec = MarchRecords(ids=ids, boundary_slots=slots, boundary_triangles=tri.astype(np.float32),
                        boundary_corners=corners, boundary_edges=edge_keys, boundary_pairs=pairs,
                        boundary_neighbors=_neighbors(slots, pairs), boundary_planes=planes.astype(np.float64),
-                       boundary_spheres=spheres, origin=origin, convex=bool(adj.convex),
+                       boundary_spheres=spheres, boundary_heights=heights, origin=origin, convex=bool(adj.convex),
                        may_jump=_may_jump(mesh, adj.canonical))
     if not cells:
         return rec
@@ -397,6 +410,27 @@ def near_plane_cells(mesh: TetMesh, camera: Camera, aspect: float) -> tuple[NDAr
     return ids.astype(np.int64), rects
 
 
+def _thin(tri: NDArray[np.float32], origin: NDArray[np.float64], camera: Camera, size: tuple[int, int]
+          ) -> NDArray[np.bool_]:
+    """Which triangles (object coordinates less ``origin``) project thinner than
+    :data:`THIN_PIXELS`: twice their area over their longest edge, in pixels. Triangles
+    reaching behind the near plane are not (the rasteriser keeps them, :func:`rim_faces`)."""
+    width, height = size
+    view = camera.view_matrix()
+    eye = (tri.astype(np.float64) + origin) @ view[:3, :3].T + view[:3, 3]  # (n, 3, 3)
+    proj = camera.projection_matrix(width / height)
+    w = eye @ proj[3, :3] + proj[3, 3]
+    ahead = np.ones(len(tri), dtype=bool) if camera.parallel_projection else \
+        (-eye[..., 2]).min(axis=1) > camera.near_far()[0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pix = (eye @ proj[:2, :3].T + proj[:2, 3]) / w[..., None] * (0.5 * np.array([width, height]))
+    e0, e1, e2 = pix[:, 1] - pix[:, 0], pix[:, 2] - pix[:, 0], pix[:, 2] - pix[:, 1]
+    area2 = np.abs(e0[:, 0] * e1[:, 1] - e0[:, 1] * e1[:, 0])
+    longest = np.sqrt(np.maximum(np.maximum((e0 ** 2).sum(axis=1), (e1 ** 2).sum(axis=1)), (e2 ** 2).sum(axis=1)))
+    with np.errstate(invalid="ignore"):
+        return ahead & (area2 < THIN_PIXELS * longest)
+
+
 def rim_faces(rec: MarchRecords, camera: Camera, size: tuple[int, int]
               ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.bool_]]:
     """The boundary faces whose entries are decided exactly in this view, the NDC
@@ -408,7 +442,8 @@ def rim_faces(rec: MarchRecords, camera: Camera, size: tuple[int, int]
     the mesh next to it crosses a long chord while one just outside crosses nothing. The
     rasteriser decides which pixel centres a face covers after snapping its corners to
     1/256 pixel, so there it can drop a ray that enters or take one that does not. The
-    faces the rays meet at a sine below :data:`EDGE_ON_SINE` and every boundary face
+    faces the rays meet at a sine below :data:`EDGE_ON_SINE`, those projecting thinner
+    than :data:`THIN_PIXELS` (needles, whose plane says little), and every boundary face
     sharing an edge with one (the *core*) are therefore entered only where the pixel's
     ray, in float64, meets the triangle itself (march_entry.frag, RIM 1), as the
     reference decides. The faces around the core are tested exactly as well as
@@ -442,6 +477,17 @@ def rim_faces(rec: MarchRecords, camera: Camera, size: tuple[int, int]
         nearest = np.sqrt(((tri[maybe] - eye.astype(np.float32)) ** 2).sum(axis=-1).min(axis=1)).astype(np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
             edge_on[maybe] = distance[maybe] / nearest < EDGE_ON_SINE
+    # Thin in projection: where the face's smallest height, times a lower bound on how the
+    # view scales lengths across the face (its sine over its depth, perspective), is not
+    # far above THIN_PIXELS, the projection itself is measured.
+    proj = camera.projection_matrix(width / height)
+    px_per_unit = 0.5 * min(proj[0, 0] * width, proj[1, 1] * height)
+    if camera.parallel_projection:
+        shrink = np.abs(planes[:, :3] @ view[2, :3])
+    else:
+        shrink = distance / far ** 2
+    maybe = np.flatnonzero(rec.boundary_heights * shrink * px_per_unit < 4.0 * THIN_PIXELS)
+    edge_on[maybe[_thin(tri[maybe], rec.origin, camera, size)]] = True
     if not edge_on.any():
         return np.empty(0, dtype=np.int64), np.empty((0, 4)), np.empty(0, dtype=bool)
     pairs = rec.boundary_pairs
