@@ -21,7 +21,8 @@
 // pass starts there. (tetvr.gl.raymarch uses the list where no pixel's overflowed.) The
 // boundary faces beside the one it left by are candidates too (u_neighbors, tested as the
 // walk sees them): the rasteriser may leave out a face the ray enters within a snapping step
-// of its edge, and beside a fold of the surface that face is where the ray goes on.
+// of its edge, and beside a fold of the surface that face is where the ray goes on. Without
+// LIST a ray that would enter such a face at once is traced again (march_next.glsl).
 // JUMPS 1: the point field jumps at some faces (duplicated nodes whose copies carry other values,
 // link.w): crossing one, the walk takes the scalars of the tet it enters.
 // MULTIPLICITY 1: the mesh repeats cells (tetvr.mesh.copies keeps each once, u_copies says how
@@ -88,19 +89,6 @@ vec4 segment(float s0, float s1, float len) {
 }
 #endif
 
-#if LIST
-layout(binding = COUNT_IMAGE, r32ui) restrict readonly uniform uimage2D u_count;
-layout(binding = LIST_IMAGE, rg32i) restrict readonly uniform iimage2D u_list;
-// Each boundary face's neighbours on the boundary (slots 4 * tet + k, -1 after the last).
-layout(binding = NEIGHBORS_IMAGE, rgba32i) restrict readonly uniform iimage2D u_neighbors;
-layout(std430, binding = MORE_BUFFER) restrict buffer More { uint u_more; };
-uniform float u_tolerance;
-#endif
-// Where a ray leaves the mesh within this fraction of its face's weights of one of the
-// face's edges, the boundary faces beside it are tested for an entry (LIST, below): seen
-// across the ray, the ray is as close to them as to that edge; elsewhere the rasteriser
-// listed any face the ray enters beside it, and every ray's last exit would pay for the test.
-#define NEAR_EDGE 0.02
 uniform int u_max_steps;      // bound on tets per ray and layer (a walk caught by rounding)
 // Most tets a ray walks by face planes before it walks by points (see main).
 #define PLANE_STEPS 8
@@ -204,24 +192,7 @@ float side(float f, vec2 p, vec2 q) {
     return f != 0.0 ? f : -cross2(g_eye_y, q - p);
 }
 
-// Whether the ray enters the mesh through boundary face s (slot 4 * tet + k), and where: its
-// plane faces the ray and the ray, seen across it, passes inside its triangle -- decided with
-// the points as the walk sees them (across), so that for an edge the face shares with the
-// one the ray left by, the two decisions are made on the same numbers.
-bool enters(int s, vec3 o, vec3 d, vec3 ow, vec3 e1, vec3 e2, float inv_dd, out float t) {
-    int tet = s >> 2, k = s & 3;
-    vec4 plane = face_plane(tet, k);
-    float den = dot(plane.xyz, d);
-    t = 0.0;
-    if (den >= 0.0) return false;  // faces away: rays leave the mesh there
-    t = -(dot(plane.xyz, o) + plane.w) / den;
-    ivec4 ids = tet_ids(tet);
-    vec2 a = across(point_record(ids[(k + 1) & 3]).xyz - ow, e1, e2, d, inv_dd).xy;
-    vec2 b = across(point_record(ids[(k + 2) & 3]).xyz - ow, e1, e2, d, inv_dd).xy;
-    vec2 c = across(point_record(ids[(k + 3) & 3]).xyz - ow, e1, e2, d, inv_dd).xy;
-    vec3 E = vec3(cross2(b, c), cross2(c, a), cross2(a, b));
-    return (min(E.x, min(E.y, E.z)) >= 0.0 || max(E.x, max(E.y, E.z)) <= 0.0) && E != vec3(0.0);
-}
+#include "march_next.glsl"
 
 // Face k of a tet (its point ids: ids) seen across the ray: its points' slots (k + 1, k + 2,
 // k + 3, in an order that turns counter-clockwise about the ray), their places p, ts and
@@ -394,6 +365,14 @@ void main() {
     if (faced) {
         ivec4 ids = tet_ids(tet);
         face_across(ids, face, ow, e1, e2, d, inv_dd, sa, sb, sc, pa, pb, pc, ts, ss, E);
+#if !CELL_DATA
+        // The scalar where the ray enters, from the face's points weighed by where it passes
+        // among them: the tet's gradient is the scalar's change over the tet's height, which
+        // in a flat sliver makes its float32 rounding large.
+        vec3 w_in = max(E, 0.0);
+        if (w_in.x + w_in.y + w_in.z > 0.0) s_in = dot(w_in, ss) / (w_in.x + w_in.y + w_in.z);
+        s_out = s_in;
+#endif
         if (min(E.x, min(E.y, E.z)) > CLEAR_ENTRY * (E.x + E.y + E.z)) {
             // As if the ray came from a tet across the entry face (next_slot(s, f, f) = s):
             // the walk's first step takes this tet, its fourth point and its cell scalar.
@@ -405,12 +384,14 @@ void main() {
     for (int step = 0; !by_points && step < PLANE_STEPS && step < u_max_steps; ++step) {
         float t_exit = 3.0e38;
         int exit_face = -1;
+        vec4 t_ahead = vec4(-1.0);  // the t of each face the ray points out of, else -1
         for (int j = 1; j < 4; ++j) {
             int kk = (face + j) & 3;
             vec4 plane = face_plane(tet, kk);
             float den = dot(plane.xyz, d);
             if (den > 0.0) {
                 float t = -(dot(plane.xyz, o) + plane.w) / den;
+                t_ahead[kk] = max(t, 0.0);
                 if (t < t_exit) { t_exit = t; exit_face = kk; }
             }
             // The entry point must lie inside the tet's other faces: a face the rasteriser
@@ -420,14 +401,41 @@ void main() {
             if (step == 0) missed = missed || dot(plane.xyz, o + t_in * d) + plane.w > u_slack;
         }
         if (exit_face < 0) break;  // no face ahead: only rounding on a degenerate ray does this
+        // The exit face's three points, in slots k + 1, k + 2, k + 3.
+        ivec4 ids = tet_ids(tet);
+        face_across(ids, exit_face, ow, e1, e2, d, inv_dd, sa, sb, sc, pa, pb, pc, ts, ss, E);
+        // Where the nearest plane's face does not hold the ray seen across it but another
+        // face ahead does, within a rounding of that plane, that face is the exit: a flat
+        // sliver's planes nearly coincide, and the nearest of them is rounding (entered
+        // beside an edge, a ray took the face into the next tet where it leaves the mesh,
+        // and crossed that tet from outside). Further on, the nearest plane stays: a ray
+        // along an edge is held by the faces that share it, whichever is the exit.
+        for (int j = 1; j < 4 && min(E.x, min(E.y, E.z)) < 0.0; ++j) {
+            int kk = (face + j) & 3;
+            if (kk == exit_face || t_ahead[kk] < 0.0 || (t_ahead[kk] - t_exit) * per_t > u_slack) continue;
+            int qa, qb, qc;
+            vec2 ua, ub, uc;
+            vec3 uts, uss, uE;
+            face_across(ids, kk, ow, e1, e2, d, inv_dd, qa, qb, qc, ua, ub, uc, uts, uss, uE);
+            if (min(uE.x, min(uE.y, uE.z)) >= 0.0) {
+                exit_face = kk;
+                t_exit = t_ahead[kk];
+                sa = qa; sb = qb; sc = qc;
+                pa = ua; pb = ub; pc = uc;
+                ts = uts; ss = uss; E = uE;
+            }
+        }
         t_out = max(t_exit, t_in);
         s_out = dot(g.xyz, o + t_out * d) + g.w;
+#if !CELL_DATA
+        // Where the exit face holds the ray, the scalar from its points, as at the entry.
+        float w_sum = E.x + E.y + E.z;
+        if (min(E.x, min(E.y, E.z)) >= 0.0 && w_sum > 0.0) s_out = dot(E, ss) / w_sum;
+#endif
         ended = composite(acc, t_in, s_in, t_out, s_out, win, per_t);
         if (ended) break;
         k = exit_face;
         link = tet_link(tet, k);
-        // The exit face's three points, in slots k + 1, k + 2, k + 3.
-        face_across(tet_ids(tet), k, ow, e1, e2, d, inv_dd, sa, sb, sc, pa, pb, pc, ts, ss, E);
         ended = link.x < 0;
         if (link.x < 0) {
             // Out of the mesh by a face the ray clearly does not pass through, seen across
@@ -554,48 +562,9 @@ void main() {
     if (missed) suspect(px);  // an entry outside its tet
 #if LIST
     f_last = -1;
-    if (status == STATUS_REENTER) {
-        uint n = min(imageLoad(u_count, px).x, uint(LIST_LENGTH));
-        float t_min = t_out - u_tolerance * per_t;  // as march_entry.frag's peel
-        float t_next = 3.0e38;
-        // A loop over all LIST_LENGTH slots, not up to n: with the count varying between
-        // the pixels a shader invocation runs together, llvmpipe (Mesa 22) ended a loop
-        // bounded by n after the first pixel's count, and a ray lost the entry it re-enters by.
-        for (int i = 0; i < LIST_LENGTH; ++i) {
-            if (uint(i) < n) {
-                ivec2 e = imageLoad(u_list, ivec2(px.x, px.y + i * int(u_viewport.y))).xy;
-                float t = intBitsToFloat(e.x);
-                bool nearer = t < t_next || (t == t_next && e.y < f_last);
-                if (e.y != entry && t >= t_min && nearer) {
-                    t_next = t;
-                    f_last = e.y;
-                }
-            }
-        }
-        // The faces beside the one it left by: where the ray leaves beside a fold of the
-        // surface and enters again at once, the rasteriser may not have listed the face it
-        // enters by for this pixel (its hit within a snapping step of the face's edge).
-        ivec4 nb = near_edge ? imageLoad(u_neighbors, ivec2(link.y & ((1 << ITEMS_ROW_SHIFT) - 1),
-                                                            link.y >> ITEMS_ROW_SHIFT)) : ivec4(-1);
-        for (int i = 0; i < 4 && nb[i] >= 0; ++i) {
-            float t;
-            if (nb[i] != entry && enters(nb[i], o, d, ow, e1, e2, inv_dd, t) && t >= t_min
-                    && (t < t_next || (t == t_next && nb[i] < f_last))) {
-                t_next = t;
-                f_last = nb[i];
-            }
-        }
-        // A walk that made no way (it left the mesh where it entered) and would enter again
-        // where it left: faces that coincide, entered in turn without end (flat slivers at
-        // the hull, each face an entry). Traced again instead of walked pass after pass.
-        if (f_last >= 0 && (t_out - t_entry) * per_t < u_slack && (t_next - t_out) * per_t < u_slack) {
-            suspect(px);
-            f_last = -1;
-        }
-        if (f_last >= 0) atomicAdd(u_more, 1u);
-        else status = STATUS_DONE;
-    }
 #endif
+    if (status == STATUS_REENTER)
+        status = next_entry(px, entry, link, near_edge, t_entry, t_out, o, d, ow, e1, e2, inv_dd, per_t);
     f_color = acc;
     f_state = vec2(t_out, status);
 }
