@@ -178,6 +178,13 @@ float cross2(vec2 p, vec2 q) {
     return p.x * q.y - p.y * q.x;
 }
 
+// The values v at a face's points weighed by w (where the ray passes among them, each >= 0),
+// or otherwise where the weights are all 0.
+float weighed(vec3 w, vec3 v, float otherwise) {
+    float sum = w.x + w.y + w.z;
+    return sum > 0.0 ? dot(w, v) / sum : otherwise;
+}
+
 // The eye's x and y axes seen across the ray (set in main).
 vec2 g_eye_x, g_eye_y;
 
@@ -369,8 +376,7 @@ void main() {
         // The scalar where the ray enters, from the face's points weighed by where it passes
         // among them: the tet's gradient is the scalar's change over the tet's height, which
         // in a flat sliver makes its float32 rounding large.
-        vec3 w_in = max(E, 0.0);
-        if (w_in.x + w_in.y + w_in.z > 0.0) s_in = dot(w_in, ss) / (w_in.x + w_in.y + w_in.z);
+        s_in = weighed(max(E, 0.0), ss, s_in);
         s_out = s_in;
 #endif
         if (min(E.x, min(E.y, E.z)) > CLEAR_ENTRY * (E.x + E.y + E.z)) {
@@ -429,8 +435,7 @@ void main() {
         s_out = dot(g.xyz, o + t_out * d) + g.w;
 #if !CELL_DATA
         // Where the exit face holds the ray, the scalar from its points, as at the entry.
-        float w_sum = E.x + E.y + E.z;
-        if (min(E.x, min(E.y, E.z)) >= 0.0 && w_sum > 0.0) s_out = dot(E, ss) / w_sum;
+        if (min(E.x, min(E.y, E.z)) >= 0.0) s_out = weighed(E, ss, s_out);
 #endif
         ended = composite(acc, t_in, s_in, t_out, s_out, win, per_t);
         if (ended) break;
@@ -489,9 +494,7 @@ void main() {
                 // triangle's scalars and the entry's are this tet's copies (same weights).
                 ivec4 ids = tet_ids(tet);
                 ss = vec3(point_record(ids[sa]).w, point_record(ids[sb]).w, point_record(ids[sc]).w);
-                vec3 w = max(E, 0.0);
-                float sum = w.x + w.y + w.z;
-                s_in = sum > 0.0 ? dot(w, ss) / sum : ss.x;
+                s_in = weighed(max(E, 0.0), ss, ss.x);
             }
 #endif
 #endif

@@ -41,9 +41,14 @@ bool enters(int s, vec3 o, vec3 d, vec3 ow, vec3 e1, vec3 e2, float inv_dd, out 
 // LIST it picks the next entry (f_last); else it leaves that to the next peel pass.
 float next_entry(ivec2 px, int entry, ivec4 link, bool near_edge, float t_entry, float t_out, vec3 o, vec3 d,
                  vec3 ow, vec3 e1, vec3 e2, float inv_dd, float per_t) {
+    float t_min = t_out - u_tolerance * per_t;  // as march_entry.frag's peel
+    // The faces beside the one it left by: where the ray leaves beside a fold of the
+    // surface and enters again at once, the rasteriser may not have drawn the face it
+    // enters by for this pixel (its hit within a snapping step of the face's edge).
+    ivec4 nb = near_edge ? imageLoad(u_neighbors, ivec2(link.y & ((1 << ITEMS_ROW_SHIFT) - 1),
+                                                        link.y >> ITEMS_ROW_SHIFT)) : ivec4(-1);
 #if LIST
     uint n = min(imageLoad(u_count, px).x, uint(LIST_LENGTH));
-    float t_min = t_out - u_tolerance * per_t;  // as march_entry.frag's peel
     float t_next = 3.0e38;
     // A loop over all LIST_LENGTH slots, not up to n: with the count varying between
     // the pixels a shader invocation runs together, llvmpipe (Mesa 22) ended a loop
@@ -59,11 +64,6 @@ float next_entry(ivec2 px, int entry, ivec4 link, bool near_edge, float t_entry,
             }
         }
     }
-    // The faces beside the one it left by: where the ray leaves beside a fold of the
-    // surface and enters again at once, the rasteriser may not have listed the face it
-    // enters by for this pixel (its hit within a snapping step of the face's edge).
-    ivec4 nb = near_edge ? imageLoad(u_neighbors, ivec2(link.y & ((1 << ITEMS_ROW_SHIFT) - 1),
-                                                        link.y >> ITEMS_ROW_SHIFT)) : ivec4(-1);
     for (int i = 0; i < 4 && nb[i] >= 0; ++i) {
         float t;
         if (nb[i] != entry && enters(nb[i], o, d, ow, e1, e2, inv_dd, t) && t >= t_min
@@ -84,17 +84,12 @@ float next_entry(ivec2 px, int entry, ivec4 link, bool near_edge, float t_entry,
     return STATUS_REENTER;
 #else
     // Without a list the next peel pass finds the next entry, among the faces the rasteriser
-    // drew for the pixel; beside a fold of the surface it may have left out the face the ray
-    // enters by at once (see LIST above). A ray that would enter a face beside the one it
-    // left by, within a rounding of where it left, is traced again.
-    if (near_edge) {
-        ivec4 nb = imageLoad(u_neighbors, ivec2(link.y & ((1 << ITEMS_ROW_SHIFT) - 1), link.y >> ITEMS_ROW_SHIFT));
-        float t_min = t_out - u_tolerance * per_t;
-        for (int i = 0; i < 4 && nb[i] >= 0; ++i) {
-            float t;
-            if (nb[i] != entry && enters(nb[i], o, d, ow, e1, e2, inv_dd, t) && t >= t_min
-                    && (t - t_out) * per_t < u_slack) suspect(px);
-        }
+    // drew for the pixel, which may leave out the one beside: a ray that would enter a face
+    // beside the one it left by, within a rounding of where it left, is traced again.
+    for (int i = 0; i < 4 && nb[i] >= 0; ++i) {
+        float t;
+        if (nb[i] != entry && enters(nb[i], o, d, ow, e1, e2, inv_dd, t) && t >= t_min
+                && (t - t_out) * per_t < u_slack) suspect(px);
     }
     return STATUS_REENTER;
 #endif

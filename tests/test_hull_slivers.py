@@ -33,10 +33,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tetvr import RenderSettings, TetMesh, TransferFunction
+from tetvr import TetMesh, TransferFunction
 from tetvr.reference.tets import render_reference
 
-from .test_rim_faces import NEEDLE_CAMERA
+from .test_rim_faces import NEEDLE_CAMERA, marcher  # noqa: F401 - marcher: the fixture
 
 PIECES = np.load(Path(__file__).parent / "data" / "torus_hull_pieces.npz")
 # The pieces' transfer functions: the walk's over its own made-up field; the fold's is the
@@ -48,15 +48,6 @@ FOLD_TF = TransferFunction.preset("viridis", (-1.5937574834869113, 1.65573851468
 
 def _piece(name: str) -> TetMesh:
     return TetMesh.from_arrays(PIECES[f"{name}_points"], PIECES[f"{name}_tets"], PIECES[f"{name}_values"])
-
-
-@pytest.fixture(scope="module")
-def marcher():
-    from tetvr.gl import Renderer
-
-    from .conftest import gl_object
-
-    yield from gl_object(lambda: Renderer(RenderSettings(method="raymarch")), "no OpenGL 4.3 context")
 
 
 @pytest.mark.gl

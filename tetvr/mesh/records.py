@@ -410,20 +410,25 @@ def near_plane_cells(mesh: TetMesh, camera: Camera, aspect: float) -> tuple[NDAr
     return ids.astype(np.int64), rects
 
 
-def _thin(tri: NDArray[np.float32], origin: NDArray[np.float64], camera: Camera, size: tuple[int, int]
-          ) -> NDArray[np.bool_]:
-    """Which triangles (object coordinates less ``origin``) project thinner than
-    :data:`THIN_PIXELS`: twice their area over their longest edge, in pixels. Triangles
-    reaching behind the near plane are not (the rasteriser keeps them, :func:`rim_faces`)."""
-    width, height = size
-    view = camera.view_matrix()
+def _projected(tri: NDArray[np.float32], origin: NDArray[np.float64], camera: Camera, view: NDArray[np.float64],
+               proj: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Triangles' corners (object coordinates less ``origin``) in NDC, and which
+    triangles lie wholly ahead of the near plane (the others' NDC mean nothing)."""
     eye = (tri.astype(np.float64) + origin) @ view[:3, :3].T + view[:3, 3]  # (n, 3, 3)
-    proj = camera.projection_matrix(width / height)
-    w = eye @ proj[3, :3] + proj[3, 3]
-    ahead = np.ones(len(tri), dtype=bool) if camera.parallel_projection else \
-        (-eye[..., 2]).min(axis=1) > camera.near_far()[0]
+    if camera.parallel_projection:
+        ahead = np.ones(len(tri), dtype=bool)
+    else:
+        ahead = (-eye[..., 2]).min(axis=1) > camera.near_far()[0]
     with np.errstate(divide="ignore", invalid="ignore"):
-        pix = (eye @ proj[:2, :3].T + proj[:2, 3]) / w[..., None] * (0.5 * np.array([width, height]))
+        ndc = (eye @ proj[:2, :3].T + proj[:2, 3]) / (eye @ proj[3, :3] + proj[3, 3])[..., None]
+    return ndc, ahead
+
+
+def _thin(ndc: NDArray[np.float64], ahead: NDArray[np.bool_], size: tuple[int, int]) -> NDArray[np.bool_]:
+    """Which triangles (corners in NDC) project thinner than :data:`THIN_PIXELS`: twice
+    their area over their longest edge, in pixels. Triangles reaching behind the near
+    plane are not (the rasteriser keeps them, :func:`rim_faces`)."""
+    pix = ndc * (0.5 * np.array(size, dtype=np.float64))
     e0, e1, e2 = pix[:, 1] - pix[:, 0], pix[:, 2] - pix[:, 0], pix[:, 2] - pix[:, 1]
     area2 = np.abs(e0[:, 0] * e1[:, 1] - e0[:, 1] * e1[:, 0])
     longest = np.sqrt(np.maximum(np.maximum((e0 ** 2).sum(axis=1), (e1 ** 2).sum(axis=1)), (e2 ** 2).sum(axis=1)))
@@ -463,6 +468,7 @@ def rim_faces(rec: MarchRecords, camera: Camera, size: tuple[int, int]
         corners = tri.reshape(-1, 3).astype(np.float64) + rec.origin
         camera = resolve_clipping_range(camera, corners if len(corners) else rec.origin[None])
     view = camera.view_matrix()
+    proj = camera.projection_matrix(width / height)
     if camera.parallel_projection:
         edge_on = np.abs(planes[:, :3] @ view[2, :3]) < EDGE_ON_SINE
     else:
@@ -480,32 +486,25 @@ def rim_faces(rec: MarchRecords, camera: Camera, size: tuple[int, int]
     # Thin in projection: where the face's smallest height, times a lower bound on how the
     # view scales lengths across the face (its sine over its depth, perspective), is not
     # far above THIN_PIXELS, the projection itself is measured.
-    proj = camera.projection_matrix(width / height)
     px_per_unit = 0.5 * min(proj[0, 0] * width, proj[1, 1] * height)
     if camera.parallel_projection:
         shrink = np.abs(planes[:, :3] @ view[2, :3])
     else:
         shrink = distance / far ** 2
     maybe = np.flatnonzero(rec.boundary_heights * shrink * px_per_unit < 4.0 * THIN_PIXELS)
-    edge_on[maybe[_thin(tri[maybe], rec.origin, camera, size)]] = True
+    edge_on[maybe[_thin(*_projected(tri[maybe], rec.origin, camera, view, proj), size)]] = True
     if not edge_on.any():
         return np.empty(0, dtype=np.int64), np.empty((0, 4)), np.empty(0, dtype=bool)
     pairs = rec.boundary_pairs
     core = _grow(edge_on, pairs)
     idx = np.flatnonzero(_grow(core, pairs))
-    eye_pts = (tri[idx].astype(np.float64) + rec.origin) @ view[:3, :3].T + view[:3, 3]
-    if camera.parallel_projection:
-        ahead = np.ones(idx.size, dtype=bool)
-    else:
-        ahead = (-eye_pts[..., 2]).min(axis=1) > camera.near_far()[0]
+    ndc, ahead = _projected(tri[idx], rec.origin, camera, view, proj)
     exclusive = core[idx] & ahead
     if not ahead.all():  # a face left to the rasteriser keeps its neighbours with it
         behind = np.zeros(planes.shape[0], dtype=bool)
         behind[idx[~ahead]] = True
         exclusive &= ~_grow(behind, pairs)[idx]
-    idx, eye_pts, exclusive = idx[ahead], eye_pts[ahead], exclusive[ahead]
-    proj = camera.projection_matrix(width / height)
-    ndc = (eye_pts @ proj[:2, :3].T + proj[:2, 3]) / (eye_pts @ proj[3, :3] + proj[3, 3])[..., None]
+    idx, ndc, exclusive = idx[ahead], ndc[ahead], exclusive[ahead]
     pad = np.array([2.0 / width, 2.0 / height])
     rects = np.concatenate([ndc.min(axis=1) - pad, ndc.max(axis=1) + pad], axis=1)
     keep = (rects[:, 0] < 1) & (rects[:, 1] < 1) & (rects[:, 2] > -1) & (rects[:, 3] > -1)
