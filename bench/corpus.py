@@ -100,12 +100,14 @@ def boundary_layer() -> TetMesh:
 
 
 def meshes() -> list[tuple[str, Callable[[], TetMesh]]]:
-    """The made meshes whose makers are installed: (name, loader)."""
+    """The made meshes whose makers are installed or that are in the cache: (name, loader)."""
     out: list[tuple[str, Callable[[], TetMesh]]] = []
-    if all(importlib.util.find_spec(m) is not None for m in ("pytetwild", "trimesh")):
-        out.append(("torus by fTetWild (swirl)", torus_tetwild))
-        out.extend((f"torus by fTetWild, {size} (swirl)", functools.partial(torus_tetwild, edge))
-                   for size, edge in FINE_TORI.items())
+    makers = all(importlib.util.find_spec(m) is not None for m in ("pytetwild", "trimesh"))
+    tori = [("torus by fTetWild (swirl)", TORUS_EDGE),
+            *((f"torus by fTetWild, {size} (swirl)", edge) for size, edge in FINE_TORI.items())]
+    # A torus already in the cache needs no fTetWild (a machine the cache was carried to).
+    out.extend((name, functools.partial(torus_tetwild, edge)) for name, edge in tori
+               if makers or (cache_dir() / f"torus_tetwild_{edge:g}.npz").is_file())
     if importlib.util.find_spec("scipy") is not None:
         out.append(("boundary layer (velocity)", boundary_layer))
     return out

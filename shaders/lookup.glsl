@@ -3,7 +3,7 @@
 // Table: sampler3D with width = thickness slice (slice 0 = zero thickness, slices 1..K =
 // d_min * base^(k-1)), height = front scalar, depth = back scalar (the slice varies fastest:
 // a trilinear fetch then reads nearby memory; tetvr.gl.util.table_texture), linear
-// filtering (TABLE_CUBIC 1: Catmull-Rom across slices instead). TABLE_NORMALIZED 1: RGB = colour per unit alpha, A = mean extinction, so
+// filtering (filter.glsl; TABLE_CUBIC 1: Catmull-Rom across slices instead). TABLE_NORMALIZED 1: RGB = colour per unit alpha, A = mean extinction, so
 // alpha = 1 - exp(-d A) is exact in d; 0: premultiplied RGBA (Kraus et al. 2004).
 // TABLE_WARP 1: the scalar nodes are uneven (tetvr.optics.tablewarp): table_st gives x, the cells
 // from the first node, and u_warp (u_warp_cells x 3, RGBA32F, no filtering) the node index
@@ -16,6 +16,8 @@
 
 // The per-fragment arithmetic is reduced to multiply-adds by constants that
 // PreintegrationTable.gl_uniforms() derives once per table.
+
+#include "filter.glsl"
 
 uniform sampler3D u_table;
 uniform vec2 u_scalar_range;   // scalars of the first and last table node
@@ -111,14 +113,14 @@ vec4 lookup_table(vec2 st, float d) {
     vec4 t = vec4(0.0);
     for (int i = 0; i < 4; ++i) {
         float k = clamp(k0 + float(i - 1), 0.0, u_table_size.z - 1.0);
-        t += w[i] * textureLod(u_table, vec3((k + 0.5) / u_table_size.z, st), 0.0);
+        t += w[i] * trilinear(u_table, vec3((k + 0.5) / u_table_size.z, st));
     }
     t = max(t, 0.0);  // Catmull-Rom can overshoot the nodes
 #if TABLE_NORMALIZED
     t.rgb = min(t.rgb, 1.0);
 #endif
 #else
-    vec4 t = textureLod(u_table, vec3(z, st), 0.0);
+    vec4 t = trilinear(u_table, vec3(z, st));
 #endif
 #if TABLE_NORMALIZED
     // Linear filtering stays within the nodes' colours, which the table keeps in [0, 1].

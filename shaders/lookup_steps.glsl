@@ -31,13 +31,13 @@ vec4 steps_fetch(bool run, vec2 xy, float z) {
     vec4 t = vec4(0.0);
     for (int i = 0; i < 4; ++i) {
         float k = (clamp(k0 + float(i - 1), 0.0, u_table_size.z - 1.0) + 0.5) / u_table_size.z;
-        t += w[i] * (run ? textureLod(u_table, vec3(k, xy), 0.0) : textureLod(u_steps, vec3(xy, k), 0.0));
+        t += w[i] * (run ? trilinear(u_table, vec3(k, xy)) : trilinear(u_steps, vec3(xy, k)));
     }
     t = max(t, 0.0);
     t.rgb = min(t.rgb, 1.0);
     return t;
 #else
-    return run ? textureLod(u_table, vec3(z, xy), 0.0) : textureLod(u_steps, vec3(xy, z), 0.0);
+    return run ? trilinear(u_table, vec3(z, xy)) : trilinear(u_steps, vec3(xy, z));
 #endif
 }
 

@@ -2,18 +2,20 @@
 //
 // Volume: sampler3D, width x height x depth = nx x ny x nz, one channel, linear filter,
 // clamped to the edge. Voxel (i, j, k) sits at texel centre ((i, j, k) + 0.5) / n, so a
-// point p_idx in index space reads texture((p_idx + 0.5) / n): hardware trilinear
-// interpolation, clamped to the box [0, n-1] like the CPU reference; INTERPOLATION_CUBIC 1
+// point p_idx in index space reads texture((p_idx + 0.5) / n): trilinear interpolation
+// (filter.glsl), clamped to the box [0, n-1] like the CPU reference; INTERPOLATION_CUBIC 1
 // reconstructs with the cubic B-spline instead. The texture holds
 // the raw values (8/16-bit normalized or float); scalar = texel * u_value_scale.
 // Transfer function: tf_points.glsl.
+
+#include "filter.glsl"
 
 uniform sampler3D u_volume;
 uniform vec3 u_inv_dims;       // 1 / (nx, ny, nz)
 uniform float u_value_scale;
 
 float texel_at(vec3 p_idx) {
-    return texture(u_volume, (p_idx + 0.5) * u_inv_dims).r;
+    return trilinear(u_volume, (p_idx + 0.5) * u_inv_dims).r;
 }
 
 #if INTERPOLATION_CUBIC

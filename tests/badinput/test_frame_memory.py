@@ -138,7 +138,9 @@ def test_the_renderer_refuses_before_making_a_target_and_still_renders(monkeypat
     mesh = synthetic.cube(2)
     cam, tf = Camera.fit(mesh), default_transfer_function(mesh)
     monkeypatch.setattr(framesize, "_address_space_limit", lambda: None)
-    with tetvr.Renderer(RenderSettings(method="raymarch")) as r:
+    # A small table: on a GPU the frame's host need (its readback) is less than a 256-bin
+    # table's build, which would be refused first.
+    with tetvr.Renderer(RenderSettings(method="raymarch", table_scalar_bins=64, table_thickness_slices=8)) as r:
         need = frame_estimate((2048, 2048), "raymarch", software=is_software(r.ctx)).host
         monkeypatch.setattr(image_mod, "available_memory", lambda: need // 2)
         with pytest.raises(FrameMemoryError, match=r"a frame of 2048x2048 pixels \(tet marching\)"):

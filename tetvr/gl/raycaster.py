@@ -36,6 +36,7 @@ from tetvr.reference.volume import INTEGRATIONS, INTERPOLATIONS, RAYCAST_MODES, 
 from tetvr.optics.transfer import TransferFunction
 from tetvr.volume.volume import Volume
 from tetvr.gl.context import context_alive, create_context, describe
+from tetvr.gl.filtering import filter_in_shader
 from tetvr.gl.shaders import ShaderCompileError, assemble, explain
 from tetvr.gl.tablebuild import TableRuns, compile_runs
 from tetvr.gl.util import (_LLVMPIPE_TEXTURE_BYTES, _SOFTWARE_GL, Clock, GLOwner, check_size, clear_gl_errors,
@@ -205,6 +206,7 @@ class Raycaster(GLOwner):
         defines["TABLE_NORMALIZED"] = 1
         defines["INTERPOLATION_CUBIC"] = _INTERPOLATIONS[interpolation]
         defines["INTEGRATION_EXACT"] = _INTEGRATIONS[integration] if spec.integrates else 0
+        defines["FILTER_IN_SHADER"] = int(filter_in_shader(self.ctx))  # shaders/filter.glsl
         key = tuple(f"{k}={v}" for k, v in sorted(defines.items()))
         prog = self._programs.get(key)
         if prog is not None:

@@ -30,6 +30,7 @@ from tetvr.order.cull import gpu_scalar_margin, visible_cells
 from tetvr.order.sort import sort_with_stats
 from tetvr.optics.transfer import TransferFunction
 from tetvr.gl.context import create_context, describe
+from tetvr.gl.filtering import filter_in_shader
 from tetvr.gl.shaders import ShaderCompileError, assemble, explain
 from tetvr.order.method import choose, march_fits
 from tetvr.gl.projected import ProjectedCells
@@ -100,13 +101,11 @@ class Renderer(GLOwner):
     def __init__(self, settings: RenderSettings | None = None, *, profile: bool = False,
                  chunk_tets: int | None = None, device: int | None = None) -> None:
         # Arguments are checked before the context is made: a refused one leaks nothing.
-        if settings is None:
-            settings = RenderSettings()
-        elif not isinstance(settings, RenderSettings):
+        settings = RenderSettings() if settings is None else settings
+        if not isinstance(settings, RenderSettings):
             hint = " (for a dict of fields, pass RenderSettings.from_dict(it))" if isinstance(settings, dict) else ""
             raise TypeError(f"settings must be a RenderSettings or None, got {type(settings).__name__}{hint}")
-        if chunk_tets is not None and not (isinstance(chunk_tets, int) and not isinstance(chunk_tets, bool)
-                                           and 1 <= chunk_tets):
+        if chunk_tets is not None and not (isinstance(chunk_tets, int) and not isinstance(chunk_tets, bool) and chunk_tets >= 1):
             raise ValueError(f"chunk_tets must be a positive integer, got {chunk_tets!r}")
         self.settings = settings
         self.profile = bool(profile)
@@ -167,6 +166,7 @@ class Renderer(GLOwner):
     # ---- programs ----
     @gl_locked  # tests and tools call it directly
     def _program(self, kind: str, **defines: int) -> Any:
+        defines["FILTER_IN_SHADER"] = int(filter_in_shader(self.ctx))  # shaders/filter.glsl
         key = (kind, *(f"{k}={v}" for k, v in sorted(defines.items())))
         prog = self._programs.get(key)
         if prog is not None:

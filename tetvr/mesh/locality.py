@@ -35,6 +35,8 @@ LOCAL_STEP = 3.0
 BITS = 10
 
 _CACHE: dict[int, TetMesh] = {}
+# id(mesh) -> a weak reference to it, for the meshes numbered locally already (kept as they are).
+_KEPT: dict[int, weakref.ref[TetMesh]] = {}
 _LOCK = threading.Lock()
 
 
@@ -93,7 +95,15 @@ def spatially_ordered(mesh: TetMesh) -> TetMesh:
     cached = _CACHE.get(id(mesh))
     if cached is not None:
         return cached
-    if mesh.n_points < MIN_POINTS or numbered_locally(mesh):
+    kept = _KEPT.get(id(mesh))
+    if kept is not None and kept() is mesh:
+        return mesh
+    if mesh.n_points < MIN_POINTS:
+        return mesh
+    if numbered_locally(mesh):  # 90 ms on 1M tets: once, not on every view change
+        with _LOCK:
+            _KEPT[id(mesh)] = weakref.ref(mesh)
+            weakref.finalize(mesh, _KEPT.pop, id(mesh), None)
         return mesh
     order = morton_order(mesh.points)
     rank = np.empty_like(order)
