@@ -823,7 +823,51 @@ def cost_model() -> str:
             f"(`bench/results/cost_model.json`).\n\n" + "\n".join(rows))
 
 
-TABLES: dict[str, Callable[[], str]] = {"cost_model": cost_model, "imperfect_meshes": imperfect_meshes, "frame_memory": frame_memory, "marching_memory": marching_memory, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
+def gpu_methods() -> str:
+    """Both methods on a lent GPU, frames in turn, and their first views against the exact
+    reference (bench/methods.py on the device; --accuracy here)."""
+    r = _load("methods_gpu.json")
+    sizes = [str(s) for s in r["sizes"]]
+    head = "| mesh | tets |" + "".join(f" {s}²: marching ms | projected ms | projected / marching |" for s in sizes)
+    rows = [head + " auto takes | first frame s, marching / projected | largest error, marching / projected "
+            "| pixels > 1/255 | PSNR dB |",
+            "|---|---:|" + "---:|---:|---:|" * len(sizes) + "---|---:|---:|---:|---:|"]
+    names = {"raymarch": "tet marching", "projected": "projected tetrahedra"}
+    for m in r["meshes"]:
+        cells = ""
+        for s in sizes:
+            t = m["sizes"][s]["median_s"]
+            cells += f" {t['raymarch'] * 1e3:.1f} | {t['projected'] * 1e3:.1f} | {t['projected'] / t['raymarch']:.2f} |"
+        auto = ", ".join(names[a] for a in sorted({a for s in sizes for a in m["sizes"][s]["auto_method"]}))
+        cells += f" {auto} |"
+        f, a = m["first_frame_s"], m.get("accuracy")
+        acc = (f" {a['raymarch']['max_error']:.1e} / {a['projected']['max_error']:.1e} "
+               f"| {a['raymarch']['pixels_beyond_1_255']} / {a['projected']['pixels_beyond_1_255']} "
+               f"| {a['raymarch']['psnr_db']:.1f} / {a['projected']['psnr_db']:.1f} |") if a else " | | |"
+        rows.append(f"| {m['name']} | {m['n_tets']:,} |{cells} {f['raymarch']:.2f} / {f['projected']:.2f} |{acc}")
+    gl = r["gl"]
+    where = "in the shader" if r["filter_in_shader"] else "by the texture unit"
+    return (f"{gl['GL_RENDERER']} ({gl['GL_VERSION']}), {r['machine']['cpu_count']} cores; its linear filtering "
+            f"errs by {r['linear_filter_error']:.2g} on a 0-to-1 ramp (`tetvr.gl.filtering`): 3D textures filtered "
+            f"{where}; median of the view "
+            f"changes (each {r['meshes'][0]['sizes'][sizes[0]]['step_deg']:g} degrees), the two methods' frames in "
+            f"turn; the first frame of the first mesh holds the driver's shader compiles; accuracy of the first view "
+            f"at {r['image_size']}x{r['image_size']} against the exact reference ({r['date'][:10]}, "
+            f"`bench/results/methods_gpu.json`).{_gpu_model(r)}\n\n" + "\n".join(rows))
+
+
+def _gpu_model(r: dict[str, Any]) -> str:
+    """The cost model fitted on a GPU run (bench/methods.py --fit), as a sentence."""
+    c = r.get("cost_model", {}).get("fitted_ns")
+    if not c:
+        return ""
+    return (f" The cost model fitted on these timings (`methods.py --fit`; llvmpipe's is in the table above): tet "
+            f"marching {c['march_ns_per_segment']:g} ns a segment, {c['march_ns_per_ray']:g} an entering ray, "
+            f"{c['march_ns_per_tet']:g} a tet; projected tetrahedra {c['projected_ns_per_tet']:g} a tet, "
+            f"{c['projected_ns_per_fragment']:g} a fragment, {c['projected_ns_per_frame'] / 1e6:g} ms a frame.")
+
+
+TABLES: dict[str, Callable[[], str]] = {"cost_model": cost_model, "gpu_methods": gpu_methods, "imperfect_meshes": imperfect_meshes, "frame_memory": frame_memory, "marching_memory": marching_memory, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
                                         "compare_demo": compare_demo,
                                         "viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "methods_vs_vtk_1024": methods_vs_vtk_1024, "methods_vs_vtk_inside": methods_vs_vtk_inside, "raymarch_stages": raymarch_stages, "raymarch_stages_1024": raymarch_stages_1024,
                                         "volume_accuracy": volume_accuracy,
