@@ -35,21 +35,21 @@ EXACT_ENOUGH = 1e-5
 PROBE_POINTS = 1021
 #: The texture unit and storage binding the probe uses: none that the renderers bind (units
 #: 0-11, bindings 0-6), so that a probe of a context in use leaves their bindings as they were.
-PROBE_UNIT = 15
+PROBE_UNIT, PROBE_BINDING = 15, 7
 
-_PROBE = """
+_PROBE = f"""
 #version 430
 layout(local_size_x = 64) in;
 uniform sampler3D u_ramp;
 uniform int u_count;
-layout(std430, binding = 7) buffer Out { float v[]; };
-void main() {
+layout(std430, binding = {PROBE_BINDING}) buffer Out {{ float v[]; }};
+void main() {{
     int i = int(gl_GlobalInvocationID.x);
     if (i >= u_count) return;
     float t = float(i) / float(u_count - 1);
     // Texel centres at x = 0.25 and 0.75 of a 2-texel-wide texture.
     v[i] = textureLod(u_ramp, vec3(0.25 + 0.5 * t, 0.5, 0.5), 0.0).r;
-}
+}}
 """
 
 _decided: "weakref.WeakKeyDictionary[Any, bool]" = weakref.WeakKeyDictionary()
@@ -70,7 +70,7 @@ def probe_error(ctx: Any) -> float:
             tex.use(PROBE_UNIT)
             prog["u_ramp"].value = PROBE_UNIT
             prog["u_count"].value = PROBE_POINTS
-            out.bind_to_storage_buffer(7)
+            out.bind_to_storage_buffer(PROBE_BINDING)
             prog.run(group_x=(PROBE_POINTS + 63) // 64)
             got = np.frombuffer(out.read(), dtype=np.float32)
         finally:
