@@ -91,10 +91,13 @@ def test_auto_s_projected_frame_is_the_reference_s_picture():
     marching's (a convex mesh in MPVO's exact order)."""
     mesh = synthetic.cube(1)
     cam = Camera.fit(mesh, direction=(-0.4, -0.25, -1.0))
-    size = (704, 704)
+    size = (896, 896)  # few cells, many pixels: the model predicts projected tetrahedra 1.9x faster
     assert choose(RenderSettings(), mesh, cam, size) == "projected"
+    from tetvr.reference.tets import render_reference_pixels
+
     tf = default_transfer_function(mesh, opacity=0.6)
-    ref = tetvr.render(mesh, camera=cam, tf=tf, size=size, method="reference")
-    image = tetvr.render(mesh, camera=cam, tf=tf, size=size)
-    diff = np.abs(image.astype(np.float64) - ref).max(axis=-1)
-    assert diff.max() < 1e-3 and np.count_nonzero(diff > 1 / 255) == 0
+    image = tetvr.render(mesh, camera=cam, tf=tf, size=size).reshape(-1, 4)
+    pixels = np.arange(0, size[0] * size[1], 37)  # every 37th pixel: rows and columns all sampled
+    ref = render_reference_pixels(mesh, cam, tf, size, pixels)
+    diff = np.abs(image[pixels].astype(np.float64) - ref).max(axis=-1)
+    assert ref[:, 3].max() > 0.3 and diff.max() < 1e-3 and np.count_nonzero(diff > 1 / 255) == 0

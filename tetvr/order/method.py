@@ -72,9 +72,9 @@ class CostModel:
 #: 512x512 and 1024x1024; relative least squares, coefficients non-negative) with the
 #: estimates below (:func:`segments_per_tet`, :func:`entering_rays`) as its inputs;
 #: bench/results/cost_model.json holds the fit and its error per scene.
-LLVMPIPE = CostModel(march_ns_per_segment=14.2, march_ns_per_ray=237.0, march_ns_per_tet=195.0,
-                     projected_ns_per_tet=1780.0, projected_ns_per_fragment=17.1,
-                     projected_ns_per_frame=30.8e6)
+LLVMPIPE = CostModel(march_ns_per_segment=13.9, march_ns_per_ray=243.0, march_ns_per_tet=167.0,
+                     projected_ns_per_tet=1810.0, projected_ns_per_fragment=17.2,
+                     projected_ns_per_frame=42.0e6)
 #: "auto" takes projected tetrahedra for speed only where the model predicts them this
 #: much faster. The model errs most on projected tetrahedra, whose cost per fragment
 #: depends on the view (the held-out close perspective of bench/results/cost_model.json:
