@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import datetime as _dt
 import functools
 import statistics
@@ -48,8 +49,8 @@ from _common import CUBE_NS, REAL_MESHES, TETS_DATA, load_quiet, machine, timed_
 
 from tetvr import Camera, Renderer  # noqa: E402
 from tetvr.apps.animate import azimuth  # noqa: E402
-from tetvr.gl.context import create_context, describe  # noqa: E402
-from tetvr.gl.filtering import filter_in_shader, probe_error  # noqa: E402
+from tetvr.gl.context import create_context  # noqa: E402
+from tetvr.gl.filtering import filter_error, filter_in_shader  # noqa: E402
 from tetvr.mesh import synthetic  # noqa: E402
 from tetvr.order.method import choose  # noqa: E402
 from tetvr.render import default_transfer_function  # noqa: E402
@@ -115,7 +116,7 @@ def bench_mesh(name: str, mesh: Any, sizes: list[int], image_size: int, step: fl
                 "auto_loss": med[max(set(auto), key=auto.count)] / med[faster] - 1.0}
             print(f"{name} {s}: march {med['raymarch'] * 1e3:.1f} ms, projected {med['projected'] * 1e3:.1f} ms,"
                   f" auto {sorted(set(auto))}", flush=True)
-        rec["gl"] = describe(renderers["raymarch"].ctx)
+        rec["gl"] = renderers["raymarch"].gl_info
     finally:
         for r in renderers.values():
             r.release()
@@ -164,8 +165,8 @@ def run(args: argparse.Namespace) -> int:
                            "sizes": args.sizes, "image_size": args.image_size, "opacity": OPACITY, "meshes": []}
     ctx = create_context()
     try:  # what tetvr.gl.filtering decided for this GL, and why
-        res["linear_filter_error"] = probe_error(ctx)
-        res["filter_in_shader"] = filter_in_shader(ctx)
+        res["linear_filter_error"] = filter_error(ctx)
+        res["filter_in_shader"] = filter_in_shader(ctx)  # from the same probe, or TETVR_FILTER
     finally:
         ctx.release()
     pending: dict[str, dict[str, np.ndarray]] = {}
@@ -204,61 +205,51 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def accuracy(out: Path) -> None:
-    """Add each kept image's error against the exact reference to ``out/methods.json``."""
+def accuracy(out: Path, fit: bool = False) -> None:
+    """Add each kept image's error against the exact reference to ``out/methods.json``;
+    with ``fit``, also the cost model's constants for that GL fitted on its timings (as
+    ``cost_model.py``). Each mesh is loaded once for both."""
     from tetvr.core.image import psnr
     from tetvr.optics.transfer import TransferFunction
     from tetvr.reference.tets import render_reference
 
+    import cost_model
+
     path = out / "methods.json"
-    res = json_load(path)
+    res = json.loads(path.read_text())
     images: dict[str, np.ndarray] = {}
     for f in sorted(out.glob("methods_images_*.npz")):
         with np.load(f) as z:
             images.update({k: z[k].astype(np.float32) / 65535.0 for k in z.files})
     loaders = dict(mesh_specs())
     size = (res["image_size"],) * 2
-    for rec in res["meshes"]:
-        if rec["name"] not in loaders or f"raymarch|{rec['name']}" not in images:
-            continue
-        mesh = loaders[rec["name"]]()
-        ref = render_reference(mesh, Camera.from_dict(rec["camera"]), TransferFunction.from_dict(rec["transfer_function"]),
-                               size)
-        rec["accuracy"] = {}
-        for m in METHODS:
-            err = np.abs(images[f"{m}|{rec['name']}"] - ref).max(axis=-1)
-            # Kept as 16-bit fixed point: its rounding (7.6e-6) is far inside 1/255.
-            rec["accuracy"][m] = {"max_error": float(err.max()), "pixels_beyond_1_255": int((err > 1 / 255).sum()),
-                                  "psnr_db": psnr(images[f"{m}|{rec['name']}"], ref)}
-        print(rec["name"], rec["accuracy"], flush=True)
-        write_json(path, res)
-
-
-def fit_model(out: Path) -> None:
-    """Fit the cost model's constants for the GL of ``out/methods.json`` (as ``cost_model.py``)."""
-    import cost_model
-
-    res = json_load(out / "methods.json")
-    loaders = dict(mesh_specs())
     rows = []
     for rec in res["meshes"]:
-        if rec["name"] not in loaders:
+        kept = f"raymarch|{rec['name']}" in images
+        if rec["name"] not in loaders or not (kept or fit):
             continue
         mesh, cam0 = loaders[rec["name"]](), Camera.from_dict(rec["camera"])
-        for s, run_ in rec["sizes"].items():
-            cams = [azimuth(cam0, run_["step_deg"] * (i + 2)) for i in range(run_["repeats"])]
-            rows.append(cost_model._row(rec["name"], mesh, cams, (int(s), int(s)), run_["median_s"]))
+        if kept:
+            ref = render_reference(mesh, cam0, TransferFunction.from_dict(rec["transfer_function"]), size)
+            rec["accuracy"] = {}
+            for m in METHODS:
+                image = images[f"{m}|{rec['name']}"]
+                err = np.abs(image - ref).max(axis=-1)
+                # Kept as 16-bit fixed point: its rounding (7.6e-6) is far inside 1/255.
+                rec["accuracy"][m] = {"max_error": float(err.max()), "pixels_beyond_1_255": int((err > 1 / 255).sum()),
+                                      "psnr_db": psnr(image, ref)}
+            print(rec["name"], rec["accuracy"], flush=True)
+            write_json(path, res)
+        if fit:
+            for s, run_ in rec["sizes"].items():
+                cams = [azimuth(cam0, run_["step_deg"] * (i + 2)) for i in range(run_["repeats"])]
+                rows.append(cost_model._row(rec["name"], mesh, cams, (int(s), int(s)), run_["median_s"]))
         del mesh
-    model = cost_model.fit(rows)
-    res["cost_model"] = {"fitted_ns": dataclasses.asdict(model), "rows": rows}
-    print(model, flush=True)
-    write_json(out / "methods.json", res)
-
-
-def json_load(path: Path) -> dict[str, Any]:
-    import json
-
-    return json.loads(path.read_text())
+    if fit:
+        model = cost_model.fit(rows)
+        res["cost_model"] = {"fitted_ns": dataclasses.asdict(model), "rows": rows}
+        print(model, flush=True)
+        write_json(path, res)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -275,9 +266,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="also profile three view changes per method (stage times, cProfile) at the first size")
     args = ap.parse_args(argv)
     if args.accuracy is not None:
-        accuracy(args.accuracy)
-        if args.fit:
-            fit_model(args.accuracy)
+        accuracy(args.accuracy, fit=args.fit)
         return 0
     return run(args)
 

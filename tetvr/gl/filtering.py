@@ -24,7 +24,7 @@ import numpy as np
 
 from tetvr.gl.context import current_in_thread
 
-__all__ = ["filter_in_shader", "probe_error", "FILTER_ENV", "EXACT_ENOUGH"]
+__all__ = ["filter_in_shader", "filter_error", "probe_error", "FILTER_ENV", "EXACT_ENOUGH"]
 
 #: The environment variable that overrides the probe: "shader" or "texture".
 FILTER_ENV = "TETVR_FILTER"
@@ -52,7 +52,7 @@ void main() {{
 }}
 """
 
-_decided: "weakref.WeakKeyDictionary[Any, bool]" = weakref.WeakKeyDictionary()
+_errors: "weakref.WeakKeyDictionary[Any, float]" = weakref.WeakKeyDictionary()
 
 
 def probe_error(ctx: Any) -> float:
@@ -91,7 +91,12 @@ def filter_in_shader(ctx: Any) -> bool:
         return forced == "shader"
     if forced:
         raise ValueError(f"{FILTER_ENV} must be 'shader' or 'texture', got {forced!r}")
-    decided = _decided.get(ctx)
-    if decided is None:
-        decided = _decided[ctx] = probe_error(ctx) > EXACT_ENOUGH
-    return decided
+    return filter_error(ctx) > EXACT_ENOUGH
+
+
+def filter_error(ctx: Any) -> float:
+    """:func:`probe_error` of ``ctx``, probed once per context."""
+    error = _errors.get(ctx)
+    if error is None:
+        error = _errors[ctx] = probe_error(ctx)
+    return error

@@ -34,10 +34,11 @@ LOCAL_STEP = 3.0
 #: Bits per axis of the Morton code: a 1024^3 lattice over the bounding box.
 BITS = 10
 
-_CACHE: dict[int, TetMesh] = {}
-# id(mesh) -> a weak reference to it, for the meshes numbered locally already (kept as they are).
-_KEPT: dict[int, weakref.ref[TetMesh]] = {}
+# id(mesh) -> the mesh renumbered, or AS_IS for one numbered locally already (kept as it is);
+# each entry goes with its mesh.
+_CACHE: dict[int, "TetMesh | str"] = {}
 _LOCK = threading.Lock()
+AS_IS = "as is"
 
 
 def morton_order(points: NDArray[np.float64], bits: int = BITS) -> NDArray[np.intp]:
@@ -94,16 +95,11 @@ def spatially_ordered(mesh: TetMesh) -> TetMesh:
     """
     cached = _CACHE.get(id(mesh))
     if cached is not None:
-        return cached
-    kept = _KEPT.get(id(mesh))
-    if kept is not None and kept() is mesh:
-        return mesh
+        return mesh if cached is AS_IS else cached  # type: ignore[return-value]
     if mesh.n_points < MIN_POINTS:
         return mesh
     if numbered_locally(mesh):  # 90 ms on 1M tets: once, not on every view change
-        with _LOCK:
-            _KEPT[id(mesh)] = weakref.ref(mesh)
-            weakref.finalize(mesh, _KEPT.pop, id(mesh), None)
+        _remember(mesh, AS_IS)
         return mesh
     order = morton_order(mesh.points)
     rank = np.empty_like(order)
@@ -117,10 +113,15 @@ def spatially_ordered(mesh: TetMesh) -> TetMesh:
     ordered = TetMesh(points=points, tets=tets, scalars=scalars, scalar_name=mesh.scalar_name, report=mesh.report,
                       cell_scalars=cells)
     ordered.__dict__["float32_origin"] = mesh.float32_origin  # the same float32 frame as the mesh's
-    with _LOCK:
-        _CACHE[id(mesh)] = ordered
-        weakref.finalize(mesh, _CACHE.pop, id(mesh), None)
+    _remember(mesh, ordered)
     return ordered
+
+
+def _remember(mesh: TetMesh, found: "TetMesh | str") -> None:
+    """Cache what :func:`spatially_ordered` found for ``mesh`` as long as the mesh lives."""
+    with _LOCK:
+        _CACHE[id(mesh)] = found
+        weakref.finalize(mesh, _CACHE.pop, id(mesh), None)
 
 
 def _canonical(tets: NDArray[np.int64], n_points: int) -> tuple[NDArray[np.int32], NDArray[np.intp]]:
