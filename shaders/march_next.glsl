@@ -35,6 +35,23 @@ bool enters(int s, vec3 o, vec3 d, vec3 ow, vec3 e1, vec3 e2, float inv_dd, out 
     return (min(E.x, min(E.y, E.z)) >= 0.0 || max(E.x, max(E.y, E.z)) <= 0.0) && E != vec3(0.0);
 }
 
+// The nearest of the boundary faces nb (slots, -1 after the last) but entry that the ray
+// enters at t >= t_min, ties to the lower slot: its slot, or -1; t_nb its t.
+int nearest_beside(ivec4 nb, int entry, float t_min, vec3 o, vec3 d, vec3 ow, vec3 e1, vec3 e2, float inv_dd,
+                   out float t_nb) {
+    int best = -1;
+    t_nb = 3.0e38;
+    for (int i = 0; i < 4 && nb[i] >= 0; ++i) {
+        float t;
+        if (nb[i] != entry && enters(nb[i], o, d, ow, e1, e2, inv_dd, t) && t >= t_min
+                && (t < t_nb || (t == t_nb && nb[i] < best))) {
+            t_nb = t;
+            best = nb[i];
+        }
+    }
+    return best;
+}
+
 // A ray that left the mesh (STATUS_REENTER) at t_out, having entered this pass at t_entry
 // by face slot entry, by the boundary face whose link is link (link.y: its row of
 // u_neighbors), beside one of its edges if near_edge: its status after this pass. With
@@ -47,6 +64,8 @@ float next_entry(ivec2 px, int entry, ivec4 link, bool near_edge, float t_entry,
     // enters by for this pixel (its hit within a snapping step of the face's edge).
     ivec4 nb = near_edge ? imageLoad(u_neighbors, ivec2(link.y & ((1 << ITEMS_ROW_SHIFT) - 1),
                                                         link.y >> ITEMS_ROW_SHIFT)) : ivec4(-1);
+    float t_nb;
+    int beside = nearest_beside(nb, entry, t_min, o, d, ow, e1, e2, inv_dd, t_nb);
 #if LIST
     uint n = min(imageLoad(u_count, px).x, uint(LIST_LENGTH));
     float t_next = 3.0e38;
@@ -64,13 +83,9 @@ float next_entry(ivec2 px, int entry, ivec4 link, bool near_edge, float t_entry,
             }
         }
     }
-    for (int i = 0; i < 4 && nb[i] >= 0; ++i) {
-        float t;
-        if (nb[i] != entry && enters(nb[i], o, d, ow, e1, e2, inv_dd, t) && t >= t_min
-                && (t < t_next || (t == t_next && nb[i] < f_last))) {
-            t_next = t;
-            f_last = nb[i];
-        }
+    if (beside >= 0 && (t_nb < t_next || (t_nb == t_next && beside < f_last))) {
+        t_next = t_nb;
+        f_last = beside;
     }
     // A walk that made no way (it left the mesh where it entered) and would enter again
     // where it left: faces that coincide, entered in turn without end (flat slivers at
@@ -86,11 +101,7 @@ float next_entry(ivec2 px, int entry, ivec4 link, bool near_edge, float t_entry,
     // Without a list the next peel pass finds the next entry, among the faces the rasteriser
     // drew for the pixel, which may leave out the one beside: a ray that would enter a face
     // beside the one it left by, within a rounding of where it left, is traced again.
-    for (int i = 0; i < 4 && nb[i] >= 0; ++i) {
-        float t;
-        if (nb[i] != entry && enters(nb[i], o, d, ow, e1, e2, inv_dd, t) && t >= t_min
-                && (t - t_out) * per_t < u_slack) suspect(px);
-    }
+    if (beside >= 0 && (t_nb - t_out) * per_t < u_slack) suspect(px);
     return STATUS_REENTER;
 #endif
 }
