@@ -20,8 +20,10 @@ constants for that GL from the timings (as ``cost_model.py`` does for llvmpipe).
 
     python bench/methods.py [--sizes 512 1024] [--out DIR] [--only NAME ...]
     python bench/methods.py --accuracy DIR [--fit]
+    python bench/methods.py --chart bench/results/methods_gpu.json
 
-Writes ``methods.json`` (after every mesh) and the images; ``bench/device_check.sh`` runs it
+Writes ``methods.json`` (after every mesh) and the images; ``--accuracy`` adds the chart
+(``methods.png``; ``--chart`` draws it for any run's JSON). ``bench/device_check.sh`` runs it
 on a lent NVIDIA machine.
 """
 
@@ -252,6 +254,49 @@ def accuracy(out: Path, fit: bool = False) -> None:
         write_json(path, res)
 
 
+def plot(res: dict[str, Any], path: Path) -> None:
+    """The run's chart: each method's time per view change at each size (log scale), and
+    its first view's PSNR against the reference where ``--accuracy`` measured it."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("matplotlib is not installed: no chart (pip install -e '.[bench]')")
+        return
+    meshes = res["meshes"]
+    names = [f"{m['name'].split(' ')[0].split('_')[0]}\n{m['n_tets'] / 1e3:.0f}k" for m in meshes]
+    x = np.arange(len(meshes))
+    fig, ax = plt.subplots(1, 2, figsize=(16, 5.4))
+    colors = {"raymarch": ("#1f77b4", "#9ecae1"), "projected": ("#2ca02c", "#a1d99b")}
+    labels = {"raymarch": "tet marching", "projected": "projected tetrahedra"}
+    bars = [(m, s) for m in METHODS for s in res["sizes"]]
+    w = 0.8 / len(bars)
+    for i, (method, size) in enumerate(bars):
+        ax[0].bar(x + (i - (len(bars) - 1) / 2) * w, [r["sizes"][str(size)]["median_s"][method] * 1e3 for r in meshes],
+                  w, color=colors[method][res["sizes"].index(size) % 2], label=f"{labels[method]}, {size}x{size}")
+    ax[0].set_yscale("log")
+    ax[0].set_ylabel("ms per view change (median)")
+    ax[0].set_title("Frame time per view change, frames in turn")
+    ax[0].legend()
+    if all("accuracy" in m for m in meshes):
+        for i, method in enumerate(METHODS):
+            ax[1].bar(x + (i - 0.5) * 0.4, [m["accuracy"][method]["psnr_db"] for m in meshes], 0.4,
+                      color=colors[method][0], label=labels[method])
+        ax[1].axhline(90.0, color="k", lw=0.8, ls="--", label="90 dB")
+        ax[1].set_ylabel(f"PSNR vs exact reference (dB), {res['image_size']}x{res['image_size']}")
+        ax[1].set_title("Accuracy of the first view (premultiplied RGB)")
+        ax[1].legend(loc="lower right")
+    for a in ax:
+        a.set_xticks(x)
+        a.set_xticklabels(names, fontsize=7)
+    fig.suptitle(f"tetvr's two methods on {res['gl']['GL_RENDERER']} ({res['date'][:10]})")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[512, 1024], help="frame sizes (square)")
@@ -262,11 +307,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--accuracy", type=Path, default=None, metavar="DIR",
                     help="add the kept images' errors against the reference to DIR/methods.json")
     ap.add_argument("--fit", action="store_true", help="with --accuracy: also fit the cost model")
+    ap.add_argument("--chart", type=Path, default=None, metavar="JSON",
+                    help="draw the chart of a run's JSON beside it (JSON with .png)")
     ap.add_argument("--profile", action="store_true",
                     help="also profile three view changes per method (stage times, cProfile) at the first size")
     args = ap.parse_args(argv)
+    if args.chart is not None:
+        plot(json.loads(args.chart.read_text()), args.chart.with_suffix(".png"))
+        return 0
     if args.accuracy is not None:
         accuracy(args.accuracy, fit=args.fit)
+        plot(json.loads((args.accuracy / "methods.json").read_text()), args.accuracy / "methods.png")
         return 0
     return run(args)
 

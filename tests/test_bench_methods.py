@@ -36,3 +36,4 @@ def test_a_timing_run_then_its_accuracy_and_model(tmp_path, monkeypatch):
     for method in ("raymarch", "projected"):  # both exact to well within 1/255 on this grid
         assert acc[method]["pixels_beyond_1_255"] == 0 and acc[method]["max_error"] < 2e-3
     assert res["cost_model"]["fitted_ns"]["march_ns_per_segment"] >= 0.0
+    assert (tmp_path / "methods.png").stat().st_size > 0  # the chart
