@@ -27,7 +27,9 @@ export TETVR_SHARED_DATA=$PWD/.dev/data TETVR_BENCH_CACHE=$PWD/.dev/cache PYTHON
   nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv 2>&1
   nproc; python3 --version
   python3 -c "from tetvr.gl.context import create_context, describe; from tetvr.gl.filtering import probe_error
-ctx = create_context(); print(describe(ctx)); print('linear filtering error (tetvr.gl.filtering):', probe_error(ctx))"
+from tetvr.gl.interpolation import probe_interpolation
+ctx = create_context(); print(describe(ctx)); print('linear filtering error (tetvr.gl.filtering):', probe_error(ctx))
+print('interpolation error, pixels (tetvr.gl.interpolation):', probe_interpolation(ctx))"
 } 2>&1 | tee "$out/check.log"
 grep -q GL_RENDERER "$out/check.log" || { echo "no GL context: see above"; exit 1; }
 # shellcheck disable=SC2086

@@ -856,6 +856,32 @@ def gpu_methods() -> str:
             f"`bench/results/methods_gpu.json`).{_gpu_model(r)}\n\n" + "\n".join(rows))
 
 
+def gpu_interpolation() -> str:
+    """Projected tetrahedra's fan varyings interpolated by a GPU's rasteriser and by the shader
+    (bench/methods.py on the device, once with each TETVR_INTERPOLATE; --accuracy here)."""
+    r = _load("methods_gpu_interpolation.json")
+    runs = r["runs"]
+    sizes = [str(s) for s in runs["shader"]["sizes"]]
+    rows = ["| mesh | tets | varyings by |" + "".join(f" {s}²: projected ms | marching ms |" for s in sizes)
+            + " projected: largest error | pixels > 1/255 | PSNR dB |",
+            "|---|---:|---|" + "---:|---:|" * len(sizes) + "---:|---:|---:|"]
+    for i, m in enumerate(runs["shader"]["meshes"]):
+        for mode in ("rasteriser", "shader"):
+            mm = runs[mode]["meshes"][i]
+            assert mm["name"] == m["name"]
+            cells = "".join(f" {mm['sizes'][s]['median_s']['projected'] * 1e3:.1f} | "
+                            f"{mm['sizes'][s]['median_s']['raymarch'] * 1e3:.1f} |" for s in sizes)
+            a = mm["accuracy"]["projected"]
+            rows.append(f"| {m['name']} | {m['n_tets']:,} | {mode} |{cells} {a['max_error']:.1e} | "
+                        f"{a['pixels_beyond_1_255']} | {a['psnr_db']:.1f} |")
+    gl = runs["shader"]["gl"]
+    return (f"{gl['GL_RENDERER']} ({gl['GL_VERSION']}); its rasteriser's interpolation errs by "
+            f"{r['interpolation_error_px']:.2g} pixel (`tetvr.gl.interpolation`'s probe; llvmpipe's "
+            f"{r['llvmpipe_interpolation_error_px']:.1g}); median of the view changes; accuracy of the first view at "
+            f"{runs['shader']['image_size']}x{runs['shader']['image_size']} against the exact reference "
+            f"({runs['shader']['date'][:10]}, `bench/results/methods_gpu_interpolation.json`).\n\n" + "\n".join(rows))
+
+
 def _gpu_model(r: dict[str, Any]) -> str:
     """The cost model fitted on a GPU run (bench/methods.py --fit), as a sentence."""
     c = r.get("cost_model", {}).get("fitted_ns")
@@ -867,7 +893,8 @@ def _gpu_model(r: dict[str, Any]) -> str:
             f"{c['projected_ns_per_fragment']:g} a fragment, {c['projected_ns_per_frame'] / 1e6:g} ms a frame.")
 
 
-TABLES: dict[str, Callable[[], str]] = {"cost_model": cost_model, "gpu_methods": gpu_methods, "imperfect_meshes": imperfect_meshes, "frame_memory": frame_memory, "marching_memory": marching_memory, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
+TABLES: dict[str, Callable[[], str]] = {"cost_model": cost_model, "gpu_methods": gpu_methods,
+                                        "gpu_interpolation": gpu_interpolation, "imperfect_meshes": imperfect_meshes, "frame_memory": frame_memory, "marching_memory": marching_memory, "parity_anatomy": parity_anatomy, "stability_cases": stability_cases, "parity_vs_exact": parity_vs_exact,
                                         "compare_demo": compare_demo,
                                         "viewer_latency": viewer_latency, "vs_paraview": vs_paraview, "methods_vs_vtk": methods_vs_vtk, "methods_vs_vtk_1024": methods_vs_vtk_1024, "methods_vs_vtk_inside": methods_vs_vtk_inside, "raymarch_stages": raymarch_stages, "raymarch_stages_1024": raymarch_stages_1024,
                                         "volume_accuracy": volume_accuracy,

@@ -53,6 +53,7 @@ from tetvr import Camera, Renderer  # noqa: E402
 from tetvr.apps.animate import azimuth  # noqa: E402
 from tetvr.gl.context import create_context  # noqa: E402
 from tetvr.gl.filtering import filter_error, filter_in_shader  # noqa: E402
+from tetvr.gl.interpolation import interpolate_in_shader, interpolation_error  # noqa: E402
 from tetvr.mesh import synthetic  # noqa: E402
 from tetvr.order.method import choose  # noqa: E402
 from tetvr.render import default_transfer_function  # noqa: E402
@@ -166,9 +167,11 @@ def run(args: argparse.Namespace) -> int:
     res: dict[str, Any] = {"date": _dt.datetime.now().isoformat(timespec="seconds"), "machine": machine(),
                            "sizes": args.sizes, "image_size": args.image_size, "opacity": OPACITY, "meshes": []}
     ctx = create_context()
-    try:  # what tetvr.gl.filtering decided for this GL, and why
+    try:  # what tetvr.gl.filtering and tetvr.gl.interpolation decided for this GL, and why
         res["linear_filter_error"] = filter_error(ctx)
         res["filter_in_shader"] = filter_in_shader(ctx)  # from the same probe, or TETVR_FILTER
+        res["interpolation_error_px"] = interpolation_error(ctx)
+        res["interpolate_in_shader"] = interpolate_in_shader(ctx)  # or TETVR_INTERPOLATE
     finally:
         ctx.release()
     pending: dict[str, dict[str, np.ndarray]] = {}

@@ -1,7 +1,7 @@
 #version 430
 // depth.frag -- the mesh's depth extent per pixel, for fusion with a ray-cast volume.
 //
-// In:  the same fan varyings as tet.frag (tet.vert), u_near, u_far.
+// In:  the same fan varyings as tet.frag (tet.vert, fan_varyings.glsl), u_near, u_far.
 // Out: f_extent = (front depth, -back depth) of this fragment's segment, eye depth along
 //      the view axis, clipped to the clipping range. Blended with MIN, the target ends
 //      with the nearest front and the farthest back over all tets at each pixel.
@@ -13,19 +13,24 @@ noperspective in vec4 v_segment;
 noperspective in vec2 v_ray;
 flat in int v_exact_tet;
 
+#include "fan_varyings.glsl"
+
 out vec2 f_extent;
 
 void main() {
+    vec2 ray;
+    vec4 segment;
+    fan_varyings(ray, segment);
     float zf, zb;
     if (v_exact_tet >= 0) {
         // Tets on the exact path (near-plane tets among them): the ray's own segment.
-        vec4 seg = exact_ray_segment(v_exact_tet, v_ray, u_near, u_far);
+        vec4 seg = exact_ray_segment(v_exact_tet, ray, u_near, u_far);
         if (seg.y <= seg.x) discard;
         zf = seg.x;
         zb = seg.y;
     } else {
-        zf = v_segment.x;
-        zb = v_segment.z;
+        zf = segment.x;
+        zb = segment.z;
 #if PERSPECTIVE_CORRECT
         if (u_perspective == 1) {
             zf = 1.0 / zf;

@@ -47,6 +47,12 @@
 // INTEGRATION_EXACT 1: no table; each segment is cut where its scalar crosses a control
 // point of the transfer function and each cut integrated in closed form and by quadrature
 // (raycast_exact.glsl, the reference's model in float32).
+// Every local of the walk's arithmetic here and in march_next.glsl, march_entry.frag and
+// march_common.glsl is precise: no fused multiply-adds, no reordering. NVIDIA's compiler
+// fuses where it likes, differently at each use, so that a point seen from two tets, or a
+// ray's origin in the entry pass and in the march, could differ in the last bit; a ray in
+// the plane of a face (a slab's face-on diagonals) then lost the tie rule (side()) and the
+// pixel (0.7 off on an H200, where `precise` on every local made it exact).
 
 #include "march_common.glsl"
 #include "window.glsl"
@@ -134,17 +140,17 @@ bool composite(inout vec4 acc, float t_in, float s_in, inout float t_out, inout 
     bool at_far = t_out >= win.y;
     if (at_far) {
         // The scalar is linear along the segment (within one tet).
-        float t_far = win.y;
+        precise float t_far = win.y;
         s_out = t_out > t_in ? s_in + (s_out - s_in) * ((t_far - t_in) / (t_out - t_in)) : s_out;
         t_out = t_far;
     }
 #if RAY_WINDOW
     // The part of the segment in front of the window's near end is not composited.
-    float t_a = max(t_in, win.x);
+    precise float t_a = max(t_in, win.x);
     bool shown = t_out > t_a;
-    float s_a = t_a > t_in && t_out > t_in ? s_in + (s_out - s_in) * ((t_a - t_in) / (t_out - t_in)) : s_in;
+    precise float s_a = t_a > t_in && t_out > t_in ? s_in + (s_out - s_in) * ((t_a - t_in) / (t_out - t_in)) : s_in;
 #else
-    float t_a = t_in, s_a = s_in;
+    precise float t_a = t_in, s_a = s_in;
     const bool shown = true;
 #endif
 #if EXTENT
@@ -156,7 +162,7 @@ bool composite(inout vec4 acc, float t_in, float s_in, inout float t_out, inout 
     return at_far;
 #else
     if (shown) {
-        vec4 seg = segment(s_a, s_out, (t_out - t_a) * per_t);
+        precise vec4 seg = segment(s_a, s_out, (t_out - t_a) * per_t);
 #if MULTIPLICITY
         // A cell the mesh holds several times: composited once per copy, as the reference does.
         for (int i = 1; i < g_copies; ++i) acc += (1.0 - acc.a) * seg;
@@ -170,18 +176,21 @@ bool composite(inout vec4 acc, float t_in, float s_in, inout float t_out, inout 
 // A point at r from the ray's origin, seen across the ray: (its place in the plane across
 // the ray, axes e1 and e2; its ray parameter t).
 vec3 across(vec3 r, vec3 e1, vec3 e2, vec3 d, float inv_dd) {
-    return vec3(dot(r, e1), dot(r, e2), dot(r, d) * inv_dd);
+    precise vec3 a = vec3(dot(r, e1), dot(r, e2), dot(r, d) * inv_dd);
+    return a;
 }
 
-// e(p, q): the turn from p to q about the origin of the plane across the ray.
+// e(p, q): the turn from p to q about the origin of the plane across the ray; precise, so
+// e(p, q) = -e(q, p) exactly.
 float cross2(vec2 p, vec2 q) {
-    return p.x * q.y - p.y * q.x;
+    precise float e = p.x * q.y - p.y * q.x;
+    return e;
 }
 
 // The values v at a face's points weighed by w (where the ray passes among them, each >= 0),
 // or otherwise where the weights are all 0.
 float weighed(vec3 w, vec3 v, float otherwise) {
-    float sum = w.x + w.y + w.z;
+    precise float sum = w.x + w.y + w.z;
     return sum > 0.0 ? dot(w, v) / sum : otherwise;
 }
 
@@ -208,8 +217,8 @@ float side(float f, vec2 p, vec2 q) {
 void face_across(ivec4 ids, int k, vec3 ow, vec3 e1, vec3 e2, vec3 d, float inv_dd, out int sa, out int sb,
                  out int sc, out vec2 pa, out vec2 pb, out vec2 pc, out vec3 ts, out vec3 ss, out vec3 E) {
     sa = (k + 1) & 3; sb = (k + 2) & 3; sc = (k + 3) & 3;
-    vec4 qa = point_record(ids[sa]), qb = point_record(ids[sb]), qc = point_record(ids[sc]);
-    vec3 a = across(qa.xyz - ow, e1, e2, d, inv_dd), b = across(qb.xyz - ow, e1, e2, d, inv_dd),
+    precise vec4 qa = point_record(ids[sa]), qb = point_record(ids[sb]), qc = point_record(ids[sc]);
+    precise vec3 a = across(qa.xyz - ow, e1, e2, d, inv_dd), b = across(qb.xyz - ow, e1, e2, d, inv_dd),
          c = across(qc.xyz - ow, e1, e2, d, inv_dd);
     pa = a.xy;
     pb = b.xy;
@@ -219,7 +228,7 @@ void face_across(ivec4 ids, int k, vec3 ow, vec3 e1, vec3 e2, vec3 d, float inv_
     E = vec3(cross2(pb, pc), cross2(pc, pa), cross2(pa, pb));
     if (E.x + E.y + E.z < 0.0) {  // clockwise about the ray: swap b and c
         int i = sb; sb = sc; sc = i;
-        vec2 p = pb; pb = pc; pc = p;
+        precise vec2 p = pb; pb = pc; pc = p;
         ts = ts.xzy;
         ss = ss.xzy;
         E = -E.xzy;
@@ -238,15 +247,15 @@ void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
 #if FIRST
 #if EXTENT
-    vec4 acc = vec4(3.0e38, -3.0e38, 0.0, 0.0);
+    precise vec4 acc = vec4(3.0e38, -3.0e38, 0.0, 0.0);
 #else
-    vec4 acc = vec4(0.0);
+    precise vec4 acc = vec4(0.0);
 #endif
     f_last = -1;
     f_state = vec2(0.0, STATUS_DONE);
 #else
-    vec4 acc = texelFetch(u_color_in, px, 0);
-    vec2 state = texelFetch(u_state_in, px, 0).xy;
+    precise vec4 acc = texelFetch(u_color_in, px, 0);
+    precise vec2 state = texelFetch(u_state_in, px, 0).xy;
     f_last = texelFetch(u_last_in, px, 0).r;
     f_state = vec2(state.x, STATUS_DONE);
     if (state.y != STATUS_REENTER) {
@@ -265,28 +274,28 @@ void main() {
 #endif
 
 #if RAY_WINDOW
-    vec2 win = ray_window((gl_FragCoord.xy / u_viewport * 2.0 - 1.0) * u_ray_scale, px, u_near, u_far);
+    precise vec2 win = ray_window((gl_FragCoord.xy / u_viewport * 2.0 - 1.0) * u_ray_scale, px, u_near, u_far);
     if (win.y <= win.x) return;  // nothing of this ray is kept
 #else
-    vec2 win = vec2(u_near, u_far);
+    precise vec2 win = vec2(u_near, u_far);
 #endif
-    vec3 o, d;
+    precise vec3 o, d;
     pixel_ray(gl_FragCoord.xy, o, d);
-    float per_t = length(d);  // world length per unit of t
+    precise float per_t = length(d);  // world length per unit of t
     // The plane across the ray (axes e1, e2) in which the walk by points sees the points.
-    vec3 dn = normalize(d);
-    vec3 e1 = normalize(abs(dn.x) < 0.6 ? vec3(0.0, -dn.z, dn.y) : vec3(-dn.y, dn.x, 0.0));
-    vec3 e2 = cross(dn, e1);
-    float inv_dd = 1.0 / dot(d, d);
-    vec3 ow = ray_from_eye(gl_FragCoord.xy);
+    precise vec3 dn = normalize(d);
+    precise vec3 e1 = normalize(abs(dn.x) < 0.6 ? vec3(0.0, -dn.z, dn.y) : vec3(-dn.y, dn.x, 0.0));
+    precise vec3 e2 = cross(dn, e1);
+    precise float inv_dd = 1.0 / dot(d, d);
+    precise vec3 ow = ray_from_eye(gl_FragCoord.xy);
     int tet, face;
-    float t_in;
+    precise float t_in;
     bool faced = false;  // the ray enters by a face it does not see edge-on
     if (entry >= 0) {
         tet = entry >> 2;
         face = entry & 3;
-        vec4 entry_plane = face_plane(tet, face);
-        float entry_den = dot(entry_plane.xyz, d);
+        precise vec4 entry_plane = face_plane(tet, face);
+        precise float entry_den = dot(entry_plane.xyz, d);
         faced = entry_den < -GRAZING * per_t;
         if (faced) {
             t_in = max(-(dot(entry_plane.xyz, o) + entry_plane.w) / entry_den, u_near);
@@ -299,19 +308,19 @@ void main() {
             // so that the points lie on a line through the ray, they say nothing, and the
             // last of the other planes the ray enters by gives t.
             ivec4 ids = tet_ids(tet);
-            vec3 a = across(point_record(ids[(face + 1) & 3]).xyz - ow, e1, e2, d, inv_dd);
-            vec3 b = across(point_record(ids[(face + 2) & 3]).xyz - ow, e1, e2, d, inv_dd);
-            vec3 c = across(point_record(ids[(face + 3) & 3]).xyz - ow, e1, e2, d, inv_dd);
-            vec3 E = vec3(cross2(b.xy, c.xy), cross2(c.xy, a.xy), cross2(a.xy, b.xy));
-            vec3 w = max(E.x + E.y + E.z < 0.0 ? -E : E, 0.0);
-            float sum = w.x + w.y + w.z;
+            precise vec3 a = across(point_record(ids[(face + 1) & 3]).xyz - ow, e1, e2, d, inv_dd);
+            precise vec3 b = across(point_record(ids[(face + 2) & 3]).xyz - ow, e1, e2, d, inv_dd);
+            precise vec3 c = across(point_record(ids[(face + 3) & 3]).xyz - ow, e1, e2, d, inv_dd);
+            precise vec3 E = vec3(cross2(b.xy, c.xy), cross2(c.xy, a.xy), cross2(a.xy, b.xy));
+            precise vec3 w = max(E.x + E.y + E.z < 0.0 ? -E : E, 0.0);
+            precise float sum = w.x + w.y + w.z;
             if (sum > 0.0) {
                 t_in = max(dot(w, vec3(a.z, b.z, c.z)) / sum, u_near);
             } else {
                 t_in = u_near;
                 for (int k = 0; k < 4; ++k) {
-                    vec4 plane = face_plane(tet, k);
-                    float den = dot(plane.xyz, d);
+                    precise vec4 plane = face_plane(tet, k);
+                    precise float den = dot(plane.xyz, d);
                     if (k != face && den < 0.0) t_in = max(t_in, -(dot(plane.xyz, o) + plane.w) / den);
                 }
             }
@@ -322,9 +331,9 @@ void main() {
         // (every tet has one: its faces' area-weighted normals sum to zero).
         tet = -2 - entry;
         face = 0;
-        float most = 3.0e38;
+        precise float most = 3.0e38;
         for (int k = 0; k < 4; ++k) {
-            float den = dot(face_plane(tet, k).xyz, d);
+            precise float den = dot(face_plane(tet, k).xyz, d);
             if (den < most) { most = den; face = k; }
         }
         t_in = u_near;
@@ -333,7 +342,7 @@ void main() {
     acc.x = min(acc.x, t_in);
 #endif
     COPIES_OF(tet);
-    float t_entry = t_in;  // where this pass's walk entered the mesh
+    precise float t_entry = t_in;  // where this pass's walk entered the mesh
 
     // The walk by points (Marmitt & Slusallek 2006) sees the points in the plane across the
     // ray, the ray at its origin: the face the ray came in by is a triangle (a, b, c)
@@ -346,8 +355,8 @@ void main() {
     g_eye_x = vec2(dot(u_inv_view[0].xyz, e1), dot(u_inv_view[0].xyz, e2));
     g_eye_y = vec2(dot(u_inv_view[1].xyz, e1), dot(u_inv_view[1].xyz, e2));
     int sa, sb, sc;
-    vec2 pa, pb, pc;
-    vec3 ts, ss, E;
+    precise vec2 pa, pb, pc;
+    precise vec3 ts, ss, E;
 
     // Where the face the ray enters by holds it as seen across it, the walk goes by points
     // from the first tet on. Else by face planes until then: the first tet (which a ray
@@ -359,10 +368,10 @@ void main() {
     // face-on (its four faces nearly in one plane): the nearest exit plane is then any of
     // three, and a walk by planes from a sliver at the boundary went astray (a Delaunay
     // mesh's hull); the points' signs decide it as the reference does.
-    vec4 g = tet_scalar(tet);
-    float s_in = dot(g.xyz, o + t_in * d) + g.w;
-    float t_out = t_in, s_out = s_in;
-    float status = STATUS_DONE;
+    precise vec4 g = tet_scalar(tet);
+    precise float s_in = dot(g.xyz, o + t_in * d) + g.w;
+    precise float t_out = t_in, s_out = s_in;
+    precise float status = STATUS_DONE;
     bool by_points = false;
     bool near_edge = true;  // where the ray left the mesh: beside an edge of that face (see LIST below)
     ivec4 link;
@@ -388,15 +397,15 @@ void main() {
         }
     }
     for (int step = 0; !by_points && step < PLANE_STEPS && step < u_max_steps; ++step) {
-        float t_exit = 3.0e38;
+        precise float t_exit = 3.0e38;
         int exit_face = -1;
-        vec4 t_ahead = vec4(-1.0);  // the t of each face the ray points out of, else -1
+        precise vec4 t_ahead = vec4(-1.0);  // the t of each face the ray points out of, else -1
         for (int j = 1; j < 4; ++j) {
             int kk = (face + j) & 3;
-            vec4 plane = face_plane(tet, kk);
-            float den = dot(plane.xyz, d);
+            precise vec4 plane = face_plane(tet, kk);
+            precise float den = dot(plane.xyz, d);
             if (den > 0.0) {
-                float t = -(dot(plane.xyz, o) + plane.w) / den;
+                precise float t = -(dot(plane.xyz, o) + plane.w) / den;
                 t_ahead[kk] = max(t, 0.0);
                 if (t < t_exit) { t_exit = t; exit_face = kk; }
             }
@@ -420,8 +429,8 @@ void main() {
             int kk = (face + j) & 3;
             if (kk == exit_face || t_ahead[kk] < 0.0 || (t_ahead[kk] - t_exit) * per_t > u_slack) continue;
             int qa, qb, qc;
-            vec2 ua, ub, uc;
-            vec3 uts, uss, uE;
+            precise vec2 ua, ub, uc;
+            precise vec3 uts, uss, uE;
             face_across(ids, kk, ow, e1, e2, d, inv_dd, qa, qb, qc, ua, ub, uc, uts, uss, uE);
             if (min(uE.x, min(uE.y, uE.z)) >= 0.0) {
                 exit_face = kk;
@@ -498,12 +507,12 @@ void main() {
             }
 #endif
 #endif
-            vec4 qn = point_record(link.y);  // the point across face f
-            vec3 n = across(qn.xyz - ow, e1, e2, d, inv_dd);
-            vec2 pn = n.xy;
-            float tn = n.z;
-            float fa = cross2(pa, pn), fb = cross2(pb, pn), fc = cross2(pc, pn);
-            float sa_ = side(fa, pa, pn), sb_ = side(fb, pb, pn), sc_ = side(fc, pc, pn);
+            precise vec4 qn = point_record(link.y);  // the point across face f
+            precise vec3 n = across(qn.xyz - ow, e1, e2, d, inv_dd);
+            precise vec2 pn = n.xy;
+            precise float tn = n.z;
+            precise float fa = cross2(pa, pn), fb = cross2(pb, pn), fc = cross2(pc, pn);
+            precise float sa_ = side(fa, pa, pn), sb_ = side(fb, pb, pn), sc_ = side(fc, pc, pn);
             // Out by (b, c, n) if e(b, n) <= 0 < e(c, n); by (c, a, n) if e(c, n) <= 0 < e(a, n);
             // else by (a, b, n). The next triangle keeps the counter-clockwise turn. Where
             // a point lies exactly on the ray's line, side() breaks the tie as the reference does.
@@ -513,15 +522,15 @@ void main() {
             E = drop_a ? vec3(fc, -fb, E.x) : (drop_b ? vec3(fa, -fc, E.y) : vec3(fb, -fa, E.z));
             int s0 = drop_a ? sb : (drop_b ? sc : sa);
             int s1 = drop_a ? sc : (drop_b ? sa : sb);
-            vec2 p0 = drop_a ? pb : (drop_b ? pc : pa);
-            vec2 p1 = drop_a ? pc : (drop_b ? pa : pb);
+            precise vec2 p0 = drop_a ? pb : (drop_b ? pc : pa);
+            precise vec2 p1 = drop_a ? pc : (drop_b ? pa : pb);
             ts = vec3(drop_a ? ts.yz : (drop_b ? ts.zx : ts.xy), tn);
             ss = vec3(drop_a ? ss.yz : (drop_b ? ss.zx : ss.xy), qn.w);
             sa = s0; sb = s1; sc = f;
             pa = p0; pb = p1; pc = pn;
-            vec3 w = max(E, 0.0);
-            float sum = w.x + w.y + w.z;
-            float t_w = sum > 0.0 ? dot(w, ts) / sum : t_in;
+            precise vec3 w = max(E, 0.0);
+            precise float sum = w.x + w.y + w.z;
+            precise float t_w = sum > 0.0 ? dot(w, ts) / sum : t_in;
             t_out = max(t_w, t_in);
 #if CELL_DATA
             s_out = s_in;
@@ -551,8 +560,8 @@ void main() {
             // the faces it may enter by (march_entry.frag), so that a face that coincides
             // with the one left is found again at the same t. (After the loop: llvmpipe
             // would read the plane at every step, for every lane.)
-            vec4 plane = face_plane(tet, k);
-            float den = dot(plane.xyz, d);
+            precise vec4 plane = face_plane(tet, k);
+            precise float den = dot(plane.xyz, d);
             if (den > 0.0) t_out = max(-(dot(plane.xyz, o) + plane.w) / den, t_in);
             // A face the ray meets almost edge-on (or not at all) is one it may have left
             // by a rounding: seen across the ray, its sliver holds the ray where a face

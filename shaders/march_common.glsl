@@ -1,5 +1,6 @@
 // march_common.glsl -- what the tet-marching ray caster's passes share: the per-tet
-// records (tetvr/mesh/records.py) read with imageLoad, and each pixel's ray.
+// records (tetvr/mesh/records.py) read with imageLoad, and each pixel's ray. Locals are
+// precise, as in every march pass (march.frag says why).
 //
 // Coordinate spaces: *_obj mesh coordinates relative to the mesh's bounding-box centre (as
 // the records), eye space as in common.glsl. Ray parameter t = eye depth along the view axis
@@ -64,7 +65,7 @@ ivec4 tet_link(int tet, int k) {
 
 // The ray through the centre of the pixel at window position xy, in obj space.
 void pixel_ray(vec2 xy, out vec3 o_obj, out vec3 d_obj) {
-    vec2 r = (xy / u_viewport * 2.0 - 1.0) * u_ray_scale;
+    precise vec2 r = (xy / u_viewport * 2.0 - 1.0) * u_ray_scale;
 #if PERSPECTIVE
     o_obj = u_inv_view[3].xyz;
     d_obj = mat3(u_inv_view) * vec3(r, -1.0);
@@ -80,7 +81,7 @@ vec3 ray_from_eye(vec2 xy) {
 #if PERSPECTIVE
     return vec3(0.0);
 #else
-    vec2 r = (xy / u_viewport * 2.0 - 1.0) * u_ray_scale;
+    precise vec2 r = (xy / u_viewport * 2.0 - 1.0) * u_ray_scale;
     return mat3(u_inv_view) * vec3(r, 0.0);
 #endif
 }

@@ -1,6 +1,6 @@
 #version 430
 // march_entry.frag -- the nearest entry of each pixel's ray into the mesh, kept by the depth
-// test (LESS) on the exact ray parameter.
+// test (LESS) on the exact ray parameter. Locals are precise (march.frag says why).
 //
 // NEAR_CELLS 1: the ray's point on the near plane lies inside tet v_id: the ray starts
 // there, at t = u_near (depth 0, ahead of every face). NEAR_CELLS 0: boundary face v_id
@@ -30,7 +30,7 @@ uniform dvec2 u_ray_scale_d;  // u_ray_scale in float64
 
 // pixel_ray in float64: a pixel centre's coordinates are exact in float32.
 void pixel_ray_d(vec2 xy, out dvec3 o_obj, out dvec3 d_obj) {
-    dvec2 r = (dvec2(xy) / dvec2(u_viewport) * 2.0LF - 1.0LF) * u_ray_scale_d;
+    precise dvec2 r = (dvec2(xy) / dvec2(u_viewport) * 2.0LF - 1.0LF) * u_ray_scale_d;
 #if PERSPECTIVE
     o_obj = u_inv_view_d[3].xyz;
     d_obj = dmat3(u_inv_view_d) * dvec3(r, -1.0LF);
@@ -47,8 +47,8 @@ void pixel_ray_d(vec2 xy, out dvec3 o_obj, out dvec3 d_obj) {
 // edge exactly one takes the ray, and a ray in the plane of a face seen edge-on is in the
 // mesh exactly where the reference has it.
 bool edge_inside(dvec3 p, dvec3 q, dvec3 o, dvec3 d) {
-    double e = dot(d, cross(p - o, q - o));
-    dvec3 turn = cross(q - p, d);  // the edge function changes by -dot(axis, turn) per unit move
+    precise double e = dot(d, cross(p - o, q - o));
+    precise dvec3 turn = cross(q - p, d);  // the edge function changes by -dot(axis, turn) per unit move
     for (int i = 0; i < 3 && e == 0.0LF; ++i) e = -dot(u_inv_view_d[i].xyz, turn);
     return e < 0.0LF;
 }
@@ -67,37 +67,37 @@ layout(std430, binding = OVERFLOW_BUFFER) restrict buffer Overflow { uint u_over
 #endif
 
 void main() {
-    vec3 o, d;
+    precise vec3 o, d;
     pixel_ray(gl_FragCoord.xy, o, d);
 #if NEAR_CELLS
-    vec3 p = o + u_near * d;
+    precise vec3 p = o + u_near * d;
     for (int k = 0; k < 4; ++k) {
-        vec4 plane = face_plane(v_id, k);
+        precise vec4 plane = face_plane(v_id, k);
         // A rounding's allowance across the faces the tet shares (a point on one is in
         // either tet, so no ray falls between them), none on the mesh's boundary: a ray
         // running almost along a boundary face a rounding outside it would otherwise start
         // in the mesh, and cross a long chord the reference does not.
-        float allowance = tet_link(v_id, k).x < 0 ? 0.0 : u_tolerance;
+        precise float allowance = tet_link(v_id, k).x < 0 ? 0.0 : u_tolerance;
         if (dot(plane.xyz, p) + plane.w > allowance) discard;
     }
     f_entry = -2 - v_id;
     gl_FragDepth = 0.0;
 #else
 #if RIM
-    dvec3 od, dd;
+    precise dvec3 od, dd;
     pixel_ray_d(gl_FragCoord.xy, od, dd);
-    dvec3 e1 = v_c1 - v_c0, e2 = v_c2 - v_c0;
-    dvec3 p = cross(dd, e2);
-    double det = dot(e1, p);  // -d . (e1 x e2): positive where the ray enters
+    precise dvec3 e1 = v_c1 - v_c0, e2 = v_c2 - v_c0;
+    precise dvec3 p = cross(dd, e2);
+    precise double det = dot(e1, p);  // -d . (e1 x e2): positive where the ray enters
     if (!(det > 0.0LF)) discard;  // faces away, or the ray runs in its plane
     if (!(edge_inside(v_c0, v_c1, od, dd) && edge_inside(v_c1, v_c2, od, dd) && edge_inside(v_c2, v_c0, od, dd)))
         discard;
-    dvec3 s = od - v_c0, q = cross(s, e1);
-    float t = float(dot(e2, q) / det);
+    precise dvec3 s = od - v_c0, q = cross(s, e1);
+    precise float t = float(dot(e2, q) / det);
 #else
-    vec4 plane = face_plane(v_id >> 2, v_id & 3);
+    precise vec4 plane = face_plane(v_id >> 2, v_id & 3);
     if (dot(plane.xyz, d) >= 0.0) discard;  // faces away: rays leave the mesh here
-    float t = plane_t(plane, o, d);
+    precise float t = plane_t(plane, o, d);
 #endif
     if (t >= u_far) discard;
     if (t < u_near) {
@@ -105,13 +105,13 @@ void main() {
         // near plane's cells take it (NEAR_CELLS). Those give the boundary no allowance, so
         // a point on the near plane a rounding inside a boundary face may be in none of
         // them: the face within a rounding behind the near plane takes the ray, at u_near.
-        vec4 near_plane = face_plane(v_id >> 2, v_id & 3);
+        precise vec4 near_plane = face_plane(v_id >> 2, v_id & 3);
         if (dot(near_plane.xyz, o + u_near * d) + near_plane.w < -u_tolerance) discard;
         t = u_near;
     }
 #if PEEL
     ivec2 px = ivec2(gl_FragCoord.xy);
-    vec2 state = texelFetch(u_state, px, 0).xy;
+    precise vec2 state = texelFetch(u_state, px, 0).xy;
     if (state.y != STATUS_REENTER || v_id == texelFetch(u_last, px, 0).r) discard;
     if (t < state.x - u_tolerance * length(d)) discard;
 #endif

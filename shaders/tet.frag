@@ -3,7 +3,8 @@
 // 3D pre-integration table (Kraus et al. 2004), and emits premultiplied RGBA for
 // back-to-front "over" blending (ONE, ONE_MINUS_SRC_ALPHA) into an RGBA32F target.
 //
-// In:  v_segment, v_ray, v_exact_tet (see tet.vert); u_near, u_far.
+// In:  v_segment, v_ray (or their values computed here: fan_varyings.glsl), v_exact_tet (see
+//      tet.vert); u_near, u_far.
 // Out: f_color, premultiplied.
 // The segment is clipped to the near and far planes here, per fragment, so tets that
 // cross them are cut rather than dropped; with clip planes or a ray limit (window.glsl)
@@ -24,14 +25,16 @@ noperspective in vec2 v_ray;  // eye-space x/depth, y/depth of the pixel's ray i
 flat in int v_exact_tet;
 flat in float v_chord;  // the longest segment the tet holds (its longest edge)
 
+#include "fan_varyings.glsl"
+
 out vec4 f_color;
 
 // The ray of this pixel through one tet, exactly (exact.glsl).
-void exact_segment(int tet, vec2 win) {
-    vec4 seg = exact_ray_segment(tet, v_ray, win.x, win.y);  // (t0, t1, sf, sb)
+void exact_segment(int tet, vec2 ray, vec2 win) {
+    vec4 seg = exact_ray_segment(tet, ray, win.x, win.y);  // (t0, t1, sf, sb)
     if (seg.y <= seg.x) discard;
 #if PERSPECTIVE
-    float per_depth = length(vec3(v_ray, 1.0));
+    float per_depth = length(vec3(ray, 1.0));
 #else
     const float per_depth = 1.0;
 #endif
@@ -39,8 +42,11 @@ void exact_segment(int tet, vec2 win) {
 }
 
 void main() {
+    vec2 ray;
+    vec4 segment;
+    fan_varyings(ray, segment);
 #if RAY_WINDOW
-    vec2 win = ray_window(v_ray, ivec2(gl_FragCoord.xy), u_near, u_far);
+    vec2 win = ray_window(ray, ivec2(gl_FragCoord.xy), u_near, u_far);
     if (win.y <= win.x) discard;
 #else
     vec2 win = vec2(u_near, u_far);
@@ -49,19 +55,19 @@ void main() {
     // Compiled in only for views where some point lies before the near plane: the
     // extra code halves the speed of llvmpipe's fragment stage even when not taken.
     if (v_exact_tet >= 0) {
-        exact_segment(v_exact_tet, win);
+        exact_segment(v_exact_tet, ray, win);
         return;
     }
 #endif
     // Front and back depth (along the view axis) and scalar, as a table texture
     // coordinate (tet.vert), of this pixel's segment.
-    float zf = v_segment.x, sf = v_segment.y, zb = v_segment.z, sb = v_segment.w;
+    float zf = segment.x, sf = segment.y, zb = segment.z, sb = segment.w;
     // World length per unit of depth along this pixel's ray.
 #if PERSPECTIVE
 #if PERSPECTIVE_CORRECT
     zf = 1.0 / zf; sf *= zf; zb = 1.0 / zb; sb *= zb;
 #endif
-    float per_depth = sqrt(1.0 + dot(v_ray, v_ray));
+    float per_depth = sqrt(1.0 + dot(ray, ray));
 #else
     const float per_depth = 1.0;
 #endif

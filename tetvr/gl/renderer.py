@@ -30,7 +30,7 @@ from tetvr.order.cull import gpu_scalar_margin, visible_cells
 from tetvr.order.sort import sort_with_stats
 from tetvr.optics.transfer import TransferFunction
 from tetvr.gl.context import create_context, describe
-from tetvr.gl.filtering import filter_in_shader
+from tetvr.gl.interpolation import exactness_defines
 from tetvr.gl.shaders import ShaderCompileError, assemble, explain
 from tetvr.order.method import choose, march_fits
 from tetvr.gl.projected import ProjectedCells
@@ -166,7 +166,7 @@ class Renderer(GLOwner):
     # ---- programs ----
     @gl_locked  # tests and tools call it directly
     def _program(self, kind: str, **defines: int) -> Any:
-        defines["FILTER_IN_SHADER"] = int(filter_in_shader(self.ctx))  # shaders/filter.glsl
+        defines.update(exactness_defines(self.ctx))  # shaders/filter.glsl, shaders/fan_varyings.glsl
         key = (kind, *(f"{k}={v}" for k, v in sorted(defines.items())))
         prog = self._programs.get(key)
         if prog is not None:
