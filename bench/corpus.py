@@ -12,7 +12,9 @@ pipe and beam of ``../shared/data`` (``_common.REAL_MESHES``), this module makes
   layer (first layer 0.2 % of the radius, growth 1.25: cells ~50:1 at the wall),
   joined by a Delaunay tetrahedralisation (``scipy.spatial.Delaunay``; the points jittered
   by 5 % of the thinnest layer, or a tenth of the cells come out flat), with a developing
-  pipe-flow profile and a wake -- the graded, stretched cells of a CFD mesh (~920k tets).
+  pipe-flow profile and a wake -- the graded, stretched cells of a CFD mesh (~920k tets),
+  and the same pipe with finer rings (~3M tets): the corpus's mesh past 2M tets (a ~3M
+  fTetWild torus would take hours on two cores, below).
 
 The tori take minutes to make on two cores (the pipe ~10 s), so each is kept in a cache
 folder (``$TETVR_BENCH_CACHE``, else ``~/.cache/tetvr/bench``) as ``.npz`` and made again
@@ -46,6 +48,8 @@ TORUS_EDGE = 0.048
 FINE_TORI = {"1M": 0.0286}
 #: The boundary-layer pipe's points around each ring and rings along it (~920k tets).
 PIPE_AROUND, PIPE_ALONG = 64, 80
+#: The finer boundary-layer pipes' names and (around, along): the cells go as their product.
+FINE_PIPES = {"3M": (104, 128)}
 
 
 def cache_dir() -> Path:
@@ -91,12 +95,12 @@ def torus_tetwild(edge: float = TORUS_EDGE) -> TetMesh:
     return _cached(f"torus_tetwild_{edge:g}", make)
 
 
-def boundary_layer() -> TetMesh:
+def boundary_layer(around: int = PIPE_AROUND, along: int = PIPE_ALONG) -> TetMesh:
     """A pipe with a graded wall layer, Delaunay-tetrahedralised
-    (:func:`tetvr.scene.imperfect.delaunay_pipe`), ~920k tets (cached)."""
+    (:func:`tetvr.scene.imperfect.delaunay_pipe`), by default ~920k tets (cached)."""
     from tetvr.scene.imperfect import delaunay_pipe
 
-    return _cached(f"boundary_layer_{PIPE_AROUND}x{PIPE_ALONG}_jittered", lambda: delaunay_pipe(PIPE_AROUND, PIPE_ALONG))
+    return _cached(f"boundary_layer_{around}x{along}_jittered", lambda: delaunay_pipe(around, along))
 
 
 def meshes() -> list[tuple[str, Callable[[], TetMesh]]]:
@@ -110,6 +114,8 @@ def meshes() -> list[tuple[str, Callable[[], TetMesh]]]:
                if makers or (cache_dir() / f"torus_tetwild_{edge:g}.npz").is_file())
     if importlib.util.find_spec("scipy") is not None:
         out.append(("boundary layer (velocity)", boundary_layer))
+        out.extend((f"boundary layer, {size} (velocity)", functools.partial(boundary_layer, *rings))
+                   for size, rings in FINE_PIPES.items())
     return out
 
 

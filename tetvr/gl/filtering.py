@@ -24,7 +24,7 @@ import numpy as np
 
 from tetvr.gl.context import current_in_thread
 
-__all__ = ["filter_in_shader", "filter_error", "probe_error", "FILTER_ENV", "EXACT_ENOUGH"]
+__all__ = ["filter_in_shader", "filter_error", "probe_error", "shader_override", "FILTER_ENV", "EXACT_ENOUGH"]
 
 #: The environment variable that overrides the probe: "shader" or "texture".
 FILTER_ENV = "TETVR_FILTER"
@@ -86,12 +86,20 @@ def filter_in_shader(ctx: Any) -> bool:
     where ``TETVR_FILTER=shader``. Probed once per context, when its first program is
     made (the probe's texture unit and storage binding are none a renderer uses, so a
     frame under way keeps its bindings)."""
-    forced = os.environ.get(FILTER_ENV, "").strip().lower()
-    if forced in ("shader", "texture"):
+    forced = shader_override(FILTER_ENV, "texture")
+    return forced if forced is not None else filter_error(ctx) > EXACT_ENOUGH
+
+
+def shader_override(env: str, other: str) -> bool | None:
+    """What the environment variable ``env`` says of a probe's decision: True for
+    ``"shader"``, False for ``other``, None where it is unset; any other value is refused
+    with a ``ValueError`` naming the variable and the value."""
+    forced = os.environ.get(env, "").strip().lower()
+    if forced in ("shader", other):
         return forced == "shader"
     if forced:
-        raise ValueError(f"{FILTER_ENV} must be 'shader' or 'texture', got {forced!r}")
-    return filter_error(ctx) > EXACT_ENOUGH
+        raise ValueError(f"{env} must be 'shader' or '{other}', got {forced!r}")
+    return None
 
 
 def filter_error(ctx: Any) -> float:

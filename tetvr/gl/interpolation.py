@@ -19,14 +19,13 @@ the shader's interpolation on llvmpipe with it).
 
 from __future__ import annotations
 
-import os
 import weakref
 from typing import Any
 
 import numpy as np
 
 from tetvr.gl.context import current_in_thread
-from tetvr.gl.filtering import PROBE_BINDING, filter_in_shader
+from tetvr.gl.filtering import PROBE_BINDING, filter_in_shader, shader_override
 
 __all__ = ["exactness_defines", "interpolate_in_shader", "interpolation_error", "probe_interpolation", "INTERPOLATE_ENV",
            "EXACT_ENOUGH_PX"]
@@ -104,12 +103,8 @@ def interpolate_in_shader(ctx: Any) -> bool:
     """Whether the fan shaders on ``ctx`` compute their varyings themselves
     (``INTERPOLATE_IN_SHADER``): where its rasteriser's interpolation errs by more than
     :data:`EXACT_ENOUGH_PX`, or where ``TETVR_INTERPOLATE=shader``. Probed once per context."""
-    forced = os.environ.get(INTERPOLATE_ENV, "").strip().lower()
-    if forced in ("shader", "rasteriser"):
-        return forced == "shader"
-    if forced:
-        raise ValueError(f"{INTERPOLATE_ENV} must be 'shader' or 'rasteriser', got {forced!r}")
-    return interpolation_error(ctx) > EXACT_ENOUGH_PX
+    forced = shader_override(INTERPOLATE_ENV, "rasteriser")
+    return forced if forced is not None else interpolation_error(ctx) > EXACT_ENOUGH_PX
 
 
 def interpolation_error(ctx: Any) -> float:
