@@ -9,7 +9,9 @@
 #   .dev/data  ../shared/data;   .dev/cache  bench/corpus.py's cached tori
 # and call: run(command="bash bench/device_check.sh", carry=[".dev"]).
 # Environment: METHODS_S, TESTS_S (time limits, s), METHODS_ARGS (extra arguments to methods.py),
-# FILTER_COMPARE=1 (methods.py again with the texture unit's filtering), TESTS_ARGS (to pytest).
+# FILTER_COMPARE=1 (methods.py again with the texture unit's filtering), TESTS_ARGS (to pytest),
+# IMAGES=1 (the GL tests keep their images, $OUT/images.tgz: compare them with this machine's
+# by bench/gpu_images.py; select tests with TESTS_ARGS, the download holds 16 MiB).
 set -u
 out=${OUT:-/tmp/device_check}
 mkdir -p "$out"
@@ -40,8 +42,11 @@ if [ -n "${FILTER_COMPARE:-}" ]; then  # the same meshes with the texture unit's
   TETVR_FILTER=texture timeout "${METHODS_S:-240}" python3 bench/methods.py --out "$out/methods_texture" \
     --image-size 64 ${METHODS_ARGS/--profile/} 2>&1 | grep -v "^ " | tee -a "$out/check.log"
 fi
+images=()
+[ -n "${IMAGES:-}" ] && images=(-p bench.gpu_images) && export TETVR_TEST_IMAGES=/tmp/test_images
 timeout "${TESTS_S:-150}" python3 -m pytest -m gl -p no:cacheprovider -n "$(nproc)" --timeout 120 -v \
-  -o console_output_style=classic --tb=line ${TESTS_ARGS:-} tests >"$out/tests.log" 2>&1
+  -o console_output_style=classic --tb=line "${images[@]}" ${TESTS_ARGS:-} tests >"$out/tests.log" 2>&1
 echo "tests: exit $?"
+[ -n "${IMAGES:-}" ] && tar czf "$out/images.tgz" -C /tmp test_images
 grep -E "FAILED|ERROR" "$out/tests.log" | tail -40
 tail -3 "$out/tests.log"

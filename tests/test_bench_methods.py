@@ -28,6 +28,7 @@ def test_a_timing_run_then_its_accuracy_and_model(tmp_path, monkeypatch):
     assert set(timed["median_s"]) == {"raymarch", "projected"} and len(timed["samples_s"]["raymarch"]) >= 5
     assert set(timed["auto_method"]) <= {"raymarch", "projected"}
     assert isinstance(res["filter_in_shader"], bool) and res["linear_filter_error"] >= 0.0
+    assert isinstance(res["interpolate_in_shader"], bool) and res["interpolation_error_px"] >= 0.0
     assert sorted(p.name for p in tmp_path.glob("methods_images_*.npz")) == ["methods_images_0.npz"]
 
     assert methods.main(["--accuracy", str(tmp_path), "--fit"]) == 0
