@@ -21,6 +21,7 @@ import argparse
 import functools
 import os
 import sys
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,7 @@ IMAGES_ENV = "TETVR_TEST_IMAGES"
 MAX_PIXELS = 512 * 512
 
 _KEPT: dict[str, np.ndarray] = {}
+_COUNT: Counter[str] = Counter()  # images kept so far per test
 
 
 def keep(image: Any, test: str) -> None:
@@ -39,8 +41,8 @@ def keep(image: Any, test: str) -> None:
     image = np.asarray(image, dtype=np.float32)
     if image.shape[0] * image.shape[1] > MAX_PIXELS:
         return
-    place = sum(k.rsplit("#", 1)[0] == test for k in _KEPT)
-    _KEPT[f"{test}#{place}"] = image
+    _KEPT[f"{test}#{_COUNT[test]}"] = image
+    _COUNT[test] += 1
 
 
 def pytest_configure(config: Any) -> None:

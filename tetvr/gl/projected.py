@@ -19,7 +19,6 @@ from numpy.typing import NDArray
 
 from tetvr.mesh.tetmesh import TetMesh
 from tetvr.gl.host import ProgramHost
-from tetvr.gl.interpolation import interpolate_in_shader
 from tetvr.gl.util import set_uniforms
 
 __all__ = ["ProjectedCells"]
@@ -209,16 +208,15 @@ class ProjectedCells:
                                                                index_element_size=4)
         attributes = [(prog[name].location, cls, fmt, offset) for name, cls, fmt, offset in _FAN_ATTRIBUTES
                       if name in prog]  # the floor shader reads no segment
-        in_shader = interpolate_in_shader(self.ctx)
         for first in range(0, n_tets, _DRAW_BATCH):
             # The index pattern counts from 0: each batch points the attributes at its first tet.
             base = first * 5 * _FAN_VERTEX_BYTES
             for location, cls, fmt, offset in attributes:
                 vao.bind(location, cls, self.fans, fmt, offset=base + offset, stride=_FAN_VERTEX_BYTES)
-            if in_shader:  # fan_varyings.glsl reads the batch's fan vertices
-                self.fans.bind_to_storage_buffer(2, offset=base, size=min(_DRAW_BATCH, n_tets - first) * 5
-                                                 * _FAN_VERTEX_BYTES)
-            vao.render(moderngl.TRIANGLES, vertices=12 * min(_DRAW_BATCH, n_tets - first))
+            count = min(_DRAW_BATCH, n_tets - first)
+            # fan_varyings.glsl (INTERPOLATE_IN_SHADER) reads the batch's fan vertices here.
+            self.fans.bind_to_storage_buffer(2, offset=base, size=count * 5 * _FAN_VERTEX_BYTES)
+            vao.render(moderngl.TRIANGLES, vertices=12 * count)
         self.ctx.disable(moderngl.BLEND)
         clock.lap("draw")
 
