@@ -62,31 +62,38 @@ def _row(name: str, mesh: Any, cams: list[Camera], size: tuple[int, int],
             "order_exact": order_exact(RenderSettings(), mesh), "measured_s": measured}
 
 
-def scene_rows(results: Path) -> list[dict[str, Any]]:
+def scene_rows(results: Path, known: list[dict[str, Any]] = ()) -> list[dict[str, Any]]:
     """One row per (mesh, size) timed by both methods: the model's inputs and the times
-    (each mesh loaded once for all the runs)."""
+    (each mesh loaded once for all the runs). A row of ``known`` (the last fit's) with the
+    same name, size and measured times is taken as it is: its inputs were computed from
+    the mesh those times were measured on (a remade fTetWild mesh differs in its cells,
+    and takes an hour to make)."""
     import vs_vtk
     from tetvr.apps.vtkcompare import orbit
 
     loaders = dict(vs_vtk._mesh_specs(False, vs_vtk.DEFAULT_DATA)[0])
-    timed: dict[str, list[tuple[dict[str, Any], dict[str, Any]]]] = {}
+    kept = {(r["name"], r["size"][0], r["measured_s"]["raymarch"], r["measured_s"]["projected"]): r for r in known}
+    timed: dict[str, list[tuple[dict[str, Any], dict[str, Any], dict[str, float]]]] = {}
     for run in RUNS:
         res = json.loads((results / run).read_text())
         for m in res["meshes"]:
-            if m["name"] in loaders and "tetvr_projected" in m["view_change_median_s"]:
-                timed.setdefault(m["name"], []).append((res, m))
-    rows = []
-    for name, records in timed.items():
-        mesh = loaders[name]()
-        for res, m in records:
             times = m["view_change_median_s"]
             march = times.get("tetvr_march", times["tetvr"] if set(m.get("auto_method", ["raymarch"])) == {"raymarch"}
                               else None)
-            if march is None:
-                continue
+            if "tetvr_projected" in times and march is not None:
+                measured = {"raymarch": march, "projected": times["tetvr_projected"]}
+                timed.setdefault(m["name"], []).append((res, m, measured))
+    rows = []
+    for name, records in timed.items():
+        todo = [rec for rec in records if (name, rec[0]["size"][0], *rec[2].values()) not in kept]
+        rows.extend(kept[(name, rec[0]["size"][0], *rec[2].values())] for rec in records if rec not in todo)
+        if not todo or name not in loaders:
+            continue
+        mesh = loaders[name]()
+        for res, m, measured in todo:
             cam0, size = Camera.from_dict(m["camera"]), tuple(res["size"])
             cams = [orbit(cam0, res["step_deg"] * (i + 1)) for i in range(1, res["repeats"] + 1)]
-            rows.append(_row(name, mesh, cams, size, {"raymarch": march, "projected": times["tetvr_projected"]}))
+            rows.append(_row(name, mesh, cams, size, measured))
             print(f"{name} {size[0]}: {rows[-1]['segments']:.3g} segments, {rows[-1]['rays']:.3g} rays", flush=True)
         del mesh
     order = list(timed)
@@ -200,9 +207,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--held-out", action="store_true", help="also time both methods on scenes outside the fit")
     args = ap.parse_args(argv)
     path = args.results / "cost_model.json"
-    held = time_held_out() if args.held_out else (json.loads(path.read_text()).get("held_out", []) if path.exists()
-                                                     else [])
-    rows = scene_rows(args.results)
+    last = json.loads(path.read_text()) if path.exists() else {}
+    held = time_held_out() if args.held_out else last.get("held_out", [])
+    rows = scene_rows(args.results, last.get("scenes", []))
     fitted = fit(rows)
     assess(rows, LLVMPIPE)
     assess(held, LLVMPIPE)

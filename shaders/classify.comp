@@ -25,7 +25,8 @@
 //      t/w are affine in screen space, so interpolating them linearly and dividing is
 //      perspective-correct (Kraus et al. 2004). Parallel projections (and
 //      PERSPECTIVE_CORRECT 0) store (w_f, t_f, w_b, t_b), interpolated linearly.
-//      ExactCount: incremented once per tet on the exact path.
+//      ExactCount: incremented once per tet on the exact path, and the first and last
+//      drawing positions (u_offset counted in) of such tets.
 
 #include "common.glsl"
 #include "lookup.glsl"
@@ -33,9 +34,11 @@
 layout(local_size_x = 64) in;
 layout(std430, binding = 2) writeonly buffer Fans { uvec4 fan_words[]; };  // 2 per FanVertex
 layout(std430, binding = 3) readonly buffer Order { uint order[]; };
-// How many fans take the exact path: the renderer compiles tet.frag's exact branch in
-// only for draws that have some (it slows llvmpipe's fragment stage when merely present).
-layout(std430, binding = 4) buffer ExactCount { uint n_exact; };
+// How many fans take the exact path, and the first and last drawing positions among them:
+// the renderer draws the fans between those with tet.frag's exact branch compiled in and
+// the others without (present, the branch slows llvmpipe's fragment stage up to threefold
+// even where no fragment takes it). The renderer sets first_exact to ~0u before a run.
+layout(std430, binding = 4) buffer ExactCount { uint n_exact; uint first_exact; uint last_exact; };
 
 uniform int u_offset;  // drawing position of this dispatch's first tet (fan vertex 0 of the range)
 uniform int u_count;   // drawing positions in this draw: positions from u_count on are left alone
@@ -98,6 +101,8 @@ void exact_fan(int p, int t, vec2 p_ndc[4], vec3 p_eye[4]) {
     vec4 rect = vec4(clamp(lo - pad, -1.0, 1.0), clamp(hi + pad, -1.0, 1.0));
     for (int slot = 0; slot < FAN_VERTICES; ++slot) put(p, slot, mix(rect.xy, rect.zw, u_rect_corner[slot]), t, vec4(0.0));
     atomicAdd(n_exact, 1u);
+    atomicMin(first_exact, uint(p + u_offset));
+    atomicMax(last_exact, uint(p + u_offset));
 }
 
 void main() {

@@ -10,7 +10,7 @@
 //   binding 2  Fans    written by classify.comp, drawn as a plain vertex buffer (tet.vert):
 //                      FAN_VERTICES FanVertex per tet, in drawing order
 //   binding 3  Order   uint tet ids, back to front (drawing position -> tet)
-//   binding 4  ExactCount  how many tets take the exact path
+//   binding 4  ExactCount  how many tets take the exact path, the first and last of them
 
 // How classify.comp treats a tet (its fan's kind).
 #define FAN_TRIANGLE (-1)  // 3-vertex silhouette: slot 4 repeats slot 1 (a degenerate 4th triangle)

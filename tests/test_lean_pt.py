@@ -175,3 +175,29 @@ def test_floor_shader_draws_the_same_triangles():
             assert r.ctx.error == "GL_NO_ERROR"
     assert np.array_equal(real[..., 3] > 0, floor[..., 3] > 0)
     assert np.all(floor[..., 0][floor[..., 3] > 0] > 0)
+
+
+def test_only_the_fans_between_the_first_and_last_exact_take_the_exact_branch(monkeypatch):
+    """The fans from the first to the last on the exact path (near-plane tets) are drawn
+    with tet.frag's exact branch compiled in, those before and after without, in drawing
+    order: the same bits as one draw with the branch, and every exact fan in that range."""
+    import tetvr.gl.renderer as gl_renderer
+
+    mesh = synthetic.cube(4)
+    tf = _tf(mesh)
+    near_corner = Camera(position=(1.6, 1.2, 1.9), focal_point=(0.0, 0.0, 0.0), view_angle=40.0,
+                         clipping_range=(2.2, 8.0))  # the near plane cuts the mesh's nearest corner
+    draws: list[tuple[int, range]] = []
+    runs = gl_renderer.exact_runs
+    monkeypatch.setattr(gl_renderer, "exact_runs", lambda exact, n: draws.extend(runs(exact, n)) or runs(exact, n))
+    with tetvr.Renderer(PT) as r:
+        got = r.render(mesh, near_corner, tf, size=(64, 64))
+        _, exact, _ = _fan_vertices(r, mesh.n_tets)
+    on_path = np.nonzero(exact[:, 0] >= 0)[0]
+    assert on_path.size and [v for v, _ in draws] in ([0, 1], [0, 1, 0])
+    assert draws[1][1] == range(on_path[0], on_path[-1] + 1) and draws[0][1] == range(on_path[0])
+    monkeypatch.setattr(gl_renderer, "exact_runs", lambda exact, n: [(1, range(n))])
+    with tetvr.Renderer(PT) as r:
+        want = r.render(mesh, near_corner, tf, size=(64, 64))
+    assert want[..., 3].max() > 0.2
+    assert np.array_equal(got, want)

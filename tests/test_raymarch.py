@@ -208,6 +208,30 @@ def test_records_built_beside_the_table_are_taken_or_dropped():
         assert r._marcher is not None and r._marcher._prefetch is None and r._marcher._records is None
 
 
+def test_records_stay_across_views_the_cost_model_sends_to_projected_tetrahedra(monkeypatch):
+    """Where "auto" chooses per view (a convex mesh: the cost model decides), a view that
+    takes projected tetrahedra keeps the records for the next that marches: they are built
+    and put on the GL once, not again every frame."""
+    import tetvr.gl.raymarch as gl_raymarch
+    from tetvr.order.method import choose
+
+    builds = []
+    prefetch = gl_raymarch.Prefetch
+    monkeypatch.setattr(gl_raymarch, "Prefetch", lambda m: builds.append(m) or prefetch(m))
+    mesh = synthetic.cube(3)
+    cam = Camera.fit(mesh)
+    big, small = (1024, 1024), (64, 64)  # few cells over many pixels: projected tetrahedra
+    assert [choose(RenderSettings(), mesh, cam, s) for s in (big, small)] == ["projected", "raymarch"]
+    with tetvr.Renderer(RenderSettings()) as r:
+        for size in (big, big, small, big):
+            r.render(mesh, cam, _tf(mesh), size=size)
+            assert r._marcher._records is not None and r._marcher._prefetch is None
+        with tetvr.Renderer(RenderSettings(method="raymarch")) as m:
+            want = m.render(mesh, cam, _tf(mesh), size=small)
+            assert np.array_equal(r.render(mesh, cam, _tf(mesh), size=small), want)
+    assert builds == [mesh, mesh]  # once for each renderer
+
+
 def test_records_put_on_the_gl_before_the_walk_check_ends_go_if_it_fails(monkeypatch):
     """The records go to the GL while the rest of the walk check runs; where that check then
     finds parts that overlap (so "auto" takes projected tetrahedra), they are released."""

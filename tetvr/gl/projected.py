@@ -21,7 +21,7 @@ from tetvr.mesh.tetmesh import TetMesh
 from tetvr.gl.host import ProgramHost
 from tetvr.gl.util import set_uniforms
 
-__all__ = ["ProjectedCells"]
+__all__ = ["ProjectedCells", "exact_runs"]
 
 #: Bytes per tet that size the largest chunk against one storage-buffer binding: the tets
 #: buffer needs 16 (the fan vertices are bound in ranges), with room for the per-tet data a
@@ -41,6 +41,26 @@ _FAN_PATTERN = np.array([0, 1, 2, 0, 2, 3, 0, 3, 4, 0, 4, 1], dtype=np.uint32)
 #: Tets per chunk: 96 MB of fan vertices (160 B a tet), which keeps host memory bounded for
 #: meshes of millions of tets (bench/memory.py) on llvmpipe, whose buffers live there.
 _DEFAULT_CHUNK = 600_000
+
+
+def exact_runs(exact: range, n_tets: int) -> list[tuple[int, range]]:
+    """The draws of ``n_tets`` classified fans: (1 with tet.frag's exact branch compiled in,
+    0 without; drawing positions), in drawing order; ``exact`` the positions from the first
+    to the last fan on the exact path (:meth:`ProjectedCells.classify`). The branch, merely
+    present, makes llvmpipe's fragment stage up to three times slower, and near-plane tets,
+    the usual exact ones, come last in a back-to-front order.
+
+    Examples
+    --------
+    >>> exact_runs(range(0), 10)
+    [(0, range(0, 10))]
+    >>> exact_runs(range(7, 9), 10)
+    [(0, range(0, 7)), (1, range(7, 9)), (0, range(9, 10))]
+    """
+    if not exact:
+        return [(0, range(n_tets))]
+    runs = [(0, range(exact.start)), (1, exact), (0, range(exact.stop, n_tets))]
+    return [(variant, run) for variant, run in runs if run]
 
 
 class ProjectedCells:
@@ -65,7 +85,7 @@ class ProjectedCells:
         self._gpu_tets: NDArray[np.int32] | None = None  # the tets buffer's cells (cell data: unshared points)
         self.fans: Any = None  # classify.comp's fan vertices, read as vertex attributes
         self._order: Any = None
-        self._exact_count: Any = None  # classify.comp's count of fans on the exact path
+        self._exact_count: Any = None  # classify.comp's count of fans on the exact path, first, last
         self.fan_indices: Any = None  # index buffer of fan patterns (_reserve_fans), made on first draw
         self._vaos: dict[int, Any] = {}
 
@@ -155,18 +175,18 @@ class ProjectedCells:
             yield int(ids.shape[0])
 
     def classify(self, n_tets: int, uniforms: dict[str, Any], clock: Any, *, perspective_correct: int,
-                 count_exact: bool = False, program: Any = None) -> int:
+                 count_exact: bool = False, program: Any = None) -> range:
         """Run classify.comp (or ``program``, which writes the same fans) over the first
         ``n_tets`` drawing positions of the order buffer: it writes their fans' vertices in
-        drawing order. With ``count_exact``, return how many fans take the exact
-        per-fragment path (a 4-byte read that waits for the classification), else 1.
-        ``uniforms`` holds the view's and, for the render, the table's (the vertices carry
-        table coordinates)."""
+        drawing order. With ``count_exact``, return the drawing positions from the first to
+        the last fan that takes the exact per-fragment path (empty where none; a 12-byte read
+        that waits for the classification), else all ``n_tets``. ``uniforms`` holds the
+        view's and, for the render, the table's (the vertices carry table coordinates)."""
         classify = program or self.owner._program("classify", PERSPECTIVE_CORRECT=perspective_correct)
         set_uniforms(classify, u_count=n_tets, **uniforms)
         if self._exact_count is None:
-            self._exact_count = self.ctx.buffer(reserve=4)
-        self._exact_count.write(b"\0\0\0\0")
+            self._exact_count = self.ctx.buffer(reserve=12)
+        self._exact_count.write(np.array([0, 0xFFFFFFFF, 0], dtype=np.uint32).tobytes())  # count, first, last
         self._mesh_buffers[0].bind_to_storage_buffer(0)
         self._mesh_buffers[1].bind_to_storage_buffer(1)
         self._order.bind_to_storage_buffer(3)
@@ -181,16 +201,18 @@ class ProjectedCells:
             self.fans.bind_to_storage_buffer(2, offset=first * per_tet, size=count * per_tet)
             set_uniforms(classify, u_offset=first)
             classify.run((count + _GROUP - 1) // _GROUP)
-        n_exact = 1
+        exact = range(n_tets)
         if count_exact:
             self.ctx.memory_barrier()
-            n_exact = int(np.frombuffer(self._exact_count.read(), dtype=np.uint32)[0])
+            count, first, last = (int(v) for v in np.frombuffer(self._exact_count.read(), dtype=np.uint32))
+            exact = range(first, last + 1) if count else range(0)
         clock.lap("classify")
-        return n_exact
+        return exact
 
-    def draw(self, prog: Any, fbo: Any, n_tets: int, blend: tuple[Any, ...], clock: Any) -> None:
-        """Draw the first ``n_tets`` classified fans with ``prog`` into ``fbo`` under
-        ``blend`` ((source, destination factors), equation), in batches of indexed fans."""
+    def draw(self, prog: Any, fbo: Any, n_tets: int, blend: tuple[Any, ...], clock: Any, first: int = 0) -> None:
+        """Draw the classified fans at drawing positions ``first`` to ``n_tets`` with ``prog``
+        into ``fbo`` under ``blend`` ((source, destination factors), equation), in batches
+        of indexed fans."""
         import moderngl
 
         fbo.use()
@@ -201,19 +223,19 @@ class ProjectedCells:
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func, self.ctx.blend_equation = blend
-        self._reserve_fans(min(n_tets, _DRAW_BATCH))
+        self._reserve_fans(min(n_tets - first, _DRAW_BATCH))
         vao = self._vaos.get(id(prog))
         if vao is None:
             vao = self._vaos[id(prog)] = self.ctx.vertex_array(prog, [], index_buffer=self.fan_indices,
                                                                index_element_size=4)
         attributes = [(prog[name].location, cls, fmt, offset) for name, cls, fmt, offset in _FAN_ATTRIBUTES
                       if name in prog]  # the floor shader reads no segment
-        for first in range(0, n_tets, _DRAW_BATCH):
+        for start in range(first, n_tets, _DRAW_BATCH):
             # The index pattern counts from 0: each batch points the attributes at its first tet.
-            base = first * 5 * _FAN_VERTEX_BYTES
+            base = start * 5 * _FAN_VERTEX_BYTES
             for location, cls, fmt, offset in attributes:
                 vao.bind(location, cls, self.fans, fmt, offset=base + offset, stride=_FAN_VERTEX_BYTES)
-            count = min(_DRAW_BATCH, n_tets - first)
+            count = min(_DRAW_BATCH, n_tets - start)
             # fan_varyings.glsl (INTERPOLATE_IN_SHADER) reads the batch's fan vertices here.
             self.fans.bind_to_storage_buffer(2, offset=base, size=count * 5 * _FAN_VERTEX_BYTES)
             vao.render(moderngl.TRIANGLES, vertices=12 * count)

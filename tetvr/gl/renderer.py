@@ -32,8 +32,8 @@ from tetvr.optics.transfer import TransferFunction
 from tetvr.gl.context import create_context, describe
 from tetvr.gl.interpolation import exactness_defines
 from tetvr.gl.shaders import ShaderCompileError, assemble, explain
-from tetvr.order.method import choose, march_fits
-from tetvr.gl.projected import ProjectedCells
+from tetvr.order.method import choose, march_fits, view_dependent
+from tetvr.gl.projected import ProjectedCells, exact_runs
 from tetvr.gl.framesize import frame_method
 from tetvr.gl.raymarch import Marcher, raymarch_capacity
 from tetvr.gl.selfcheck import retrace, retrace_extent
@@ -277,14 +277,14 @@ class Renderer(GLOwner):
                     u_near=near, u_far=far, u_ray_scale=(1.0 / float(proj[0, 0]), 1.0 / float(proj[1, 1])))
 
     def _classify(self, n_tets: int, uniforms: dict[str, Any], *, perspective_correct: int,
-                  count_exact: bool = False, program: Any = None) -> int:
+                  count_exact: bool = False, program: Any = None) -> range:
         """Classify the first ``n_tets`` cells of the current chunk (:meth:`ProjectedCells.classify`)."""
         return self._cells.classify(n_tets, uniforms, self._clock, perspective_correct=perspective_correct,
                                     count_exact=count_exact, program=program)
 
-    def _draw(self, prog: Any, fbo: Any, n_tets: int, blend: tuple[Any, ...]) -> None:
-        """Draw the first ``n_tets`` classified fans into ``fbo`` (:meth:`ProjectedCells.draw`)."""
-        self._cells.draw(prog, fbo, n_tets, blend, self._clock)
+    def _draw(self, prog: Any, fbo: Any, n_tets: int, blend: tuple[Any, ...], first: int = 0) -> None:
+        """Draw the classified fans ``first`` to ``n_tets`` into ``fbo`` (:meth:`ProjectedCells.draw`)."""
+        self._cells.draw(prog, fbo, n_tets, blend, self._clock, first)
 
     def _read(self, fbo: Any, size: tuple[int, int], components: int, dtype: str = "f4") -> NDArray[np.float32]:
         raw = fbo.read(components=components, dtype=dtype)
@@ -391,8 +391,7 @@ class Renderer(GLOwner):
             before_near, beyond_far = _outside_clipping_range(mesh, camera)
             defines.update(CLIP_RANGE=int(before_near or beyond_far or window.active),
                            PERSPECTIVE=int(not camera.parallel_projection), **window.defines)
-        # Two variants: tet.frag's exact per-fragment branch compiled in or not (NEAR_CROSSING),
-        # the first for the draws whose classification sent some tet down that path.
+        # tet.frag with its exact per-fragment branch (NEAR_CROSSING) and without (exact_runs).
         progs = [self._program(shader, **defines, **({"NEAR_CROSSING": on} if shader == "tet" else {}))
                  for on in (0, 1)]
         for prog in progs:
@@ -404,10 +403,12 @@ class Renderer(GLOwner):
         fbo.clear(0.0, 0.0, 0.0, 0.0)
         self._table_tex.use(0)  # nothing in the loop binds another texture
         self._clock.lap("setup")
+        blend = (moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
         for n in self._chunks(mesh, order_ids):
-            n_exact = self._classify(n, {**uniforms, **table.gl_uniforms()},
-                                     perspective_correct=defines["PERSPECTIVE_CORRECT"], count_exact=True)
-            self._draw(progs[n_exact > 0], fbo, n, ((moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA), moderngl.FUNC_ADD))
+            exact = self._classify(n, {**uniforms, **table.gl_uniforms()},
+                                   perspective_correct=defines["PERSPECTIVE_CORRECT"], count_exact=True)
+            for variant, run in exact_runs(exact, n):
+                self._draw(progs[variant], fbo, run.stop, (blend, moderngl.FUNC_ADD), run.start)
         image = self._read(fbo, size, 4, fb_dtype)
         self.last_stats = FrameStats(n_tets=mesh.n_tets, size=size, cycle_breaks=cycle_breaks, n_culled=n_culled,
                                      **self._clock.laps)
@@ -477,7 +478,7 @@ class Renderer(GLOwner):
             upload = choose(self.settings) == "raymarch"
             self._marcher.settle(mesh, keep=upload, upload=upload)
         if choose(self.settings, mesh, camera, size) != "raymarch":
-            if self._marcher is not None:
+            if self._marcher is not None and not view_dependent(self.settings, mesh):  # else the next view may march
                 self._marcher.settle(mesh, keep=False)
                 self._marcher.drop_unused(mesh)
             return False

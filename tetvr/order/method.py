@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 
 __all__ = ["choose", "segments_per_tet", "entering_rays", "predicted_seconds", "order_exact", "CostModel",
            "LLVMPIPE", "AUTO_MARGIN", "RAYMARCH_ONLY", "PROJECTED_ONLY", "AUTO_MAX_TETS", "MARCH_BYTES_PER_TET",
-           "MARCH_MEMORY_SHARE", "march_fits"]
+           "MARCH_MEMORY_SHARE", "march_fits", "view_dependent"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,17 +72,16 @@ class CostModel:
 #: 512x512 and 1024x1024; relative least squares, coefficients non-negative) with the
 #: estimates below (:func:`segments_per_tet`, :func:`entering_rays`) as its inputs;
 #: bench/results/cost_model.json holds the fit and its error per scene.
-LLVMPIPE = CostModel(march_ns_per_segment=13.9, march_ns_per_ray=243.0, march_ns_per_tet=167.0,
-                     projected_ns_per_tet=1810.0, projected_ns_per_fragment=17.2,
-                     projected_ns_per_frame=42.0e6)
+LLVMPIPE = CostModel(march_ns_per_segment=14.9, march_ns_per_ray=232.0, march_ns_per_tet=116.0,
+                     projected_ns_per_tet=1550.0, projected_ns_per_fragment=18.6,
+                     projected_ns_per_frame=45.7e6)
 #: "auto" takes projected tetrahedra for speed only where the model predicts them this
-#: much faster. The model errs most on projected tetrahedra, whose cost per fragment
-#: depends on the view (the held-out close perspective of bench/results/cost_model.json:
-#: predicted the faster, measured more than twice as slow), and they are the less
-#: accurate method on real meshes at large sizes (bench/results/speed_accuracy.json, the
-#: beam at 1024x1024: their largest error ten times tet marching's), so a near tie goes to
-#: tet marching.
-AUTO_MARGIN = 1.5
+#: much faster: a near tie goes to tet marching, the more accurate method on real meshes
+#: at large sizes (bench/results/speed_accuracy.json, the beam at 1024x1024: projected
+#: tetrahedra's largest error ten times tet marching's). Chosen on the fit's and the
+#: held-out scenes of bench/results/cost_model.json: within the model's scatter there,
+#: and no scene loses more than a few per cent against the faster method.
+AUTO_MARGIN = 1.1
 #: Host memory tet marching takes per tet for a mesh's first frame on llvmpipe, which keeps
 #: GL textures in host memory: the records, the face adjacency and its temporaries
 #: (bench/results/frame_memory.json: 330 B a tet measured on 105k and 413k tets, beside the
@@ -162,6 +161,24 @@ def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Cam
             if AUTO_MARGIN * cost["projected"] < cost["raymarch"]:
                 return "projected"
     return "raymarch"
+
+
+def view_dependent(settings: RenderSettings, mesh: "TetMesh") -> bool:
+    """Whether "auto" chooses per view for ``mesh`` under ``settings`` (:func:`choose`):
+    tet marching can render it (the walk check passes, the records fit in memory) and
+    projected tetrahedra's order would be exact, so that the cost model decides. A
+    renderer keeps the mesh's tet-marching records across views that take projected
+    tetrahedra only then.
+
+    Examples
+    --------
+    >>> from tetvr.mesh import synthetic
+    >>> cube = synthetic.cube(3)
+    >>> view_dependent(RenderSettings(), cube), view_dependent(RenderSettings(optics="vtk"), cube)
+    (True, False)
+    """
+    return (settings.method == "auto" and choose(settings) == "raymarch" and march_fits(mesh.n_tets)
+            and not walk_check(mesh).reasons and order_exact(settings, mesh))
 
 
 def march_fits(n_tets: int, available: int | None = -1) -> bool:
