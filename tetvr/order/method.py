@@ -72,9 +72,9 @@ class CostModel:
 #: 512x512 and 1024x1024; relative least squares, coefficients non-negative) with the
 #: estimates below (:func:`segments_per_tet`, :func:`entering_rays`) as its inputs;
 #: bench/results/cost_model.json holds the fit and its error per scene.
-LLVMPIPE = CostModel(march_ns_per_segment=14.9, march_ns_per_ray=232.0, march_ns_per_tet=116.0,
-                     projected_ns_per_tet=1550.0, projected_ns_per_fragment=18.6,
-                     projected_ns_per_frame=45.7e6)
+LLVMPIPE = CostModel(march_ns_per_segment=15.4, march_ns_per_ray=196.0, march_ns_per_tet=114.0,
+                     projected_ns_per_tet=1630.0, projected_ns_per_fragment=16.2,
+                     projected_ns_per_frame=45.9e6)
 #: "auto" takes projected tetrahedra for speed only where the model predicts them this
 #: much faster: a near tie goes to tet marching, the more accurate method on real meshes
 #: at large sizes (bench/results/speed_accuracy.json, the beam at 1024x1024: projected
