@@ -470,9 +470,8 @@ class Renderer(GLOwner):
         return self._marcher
 
     def _uses_raymarch(self, mesh: TetMesh, camera: Camera | None = None, size: tuple[int, int] | None = None) -> bool:
-        """Whether frames of this mesh go to the tet-marching ray caster: what
-        :func:`tetvr.order.method.choose` says, unless the records would not fit one texture of
-        this GL (then projected tetrahedra, which draw in chunks)."""
+        """Whether frames of this mesh go to the tet-marching ray caster: what :func:`tetvr.order.method.choose`
+        says, unless the records would not fit one texture of this GL (then projected tetrahedra)."""
         if self._marcher is not None:
             # The walk check choose() reads (and, meanwhile, the records on the GL: tetvr.gl.raymarch).
             upload = choose(self.settings) == "raymarch"
