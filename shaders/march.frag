@@ -203,9 +203,9 @@ vec2 g_eye_x, g_eye_y;
 // a ray in a face's plane is in the tet the reference gives it to, and a ray in a boundary
 // face's plane is in the mesh exactly where the reference has it.
 float side(float f, vec2 p, vec2 q) {
-    if (f != 0.0) return f;
-    f = -cross2(g_eye_x, q - p);
-    return f != 0.0 ? f : -cross2(g_eye_y, q - p);
+    precise vec2 e = q - p;
+    precise float x = -cross2(g_eye_x, e), y = -cross2(g_eye_y, e);
+    return f != 0.0 ? f : (x != 0.0 ? x : y);
 }
 
 #include "march_next.glsl"
