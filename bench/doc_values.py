@@ -213,6 +213,20 @@ def march_lanes() -> str:
             f"{r['size'][0]}x{r['size'][1]})")
 
 
+def march_parts() -> str:
+    """bench/README.md: what each part of a tet-marching step costs (bench/march_parts.py)."""
+    r = _load(RESULTS / "march_parts.json")
+    meshes = r["meshes"]
+    parts = []
+    for part in meshes[0]["parts"]:
+        shares = sorted(m["parts"][part]["share"] for m in meshes)
+        parts.append(f"the {part} {shares[0]:.0%} to {shares[-1]:.0%}")
+    names = ", ".join(m["name"].split("_")[0] for m in meshes)
+    return (f"with one part of every step replaced by arithmetic on the same inputs, the march's view change "
+            f"at {r['size'][0]}x{r['size'][1]} ({names}; medians of {r['rounds']} processes of {r['repeats']} "
+            f"frames each, `bench/results/march_parts.json`) is shorter by: {'; '.join(parts)}")
+
+
 def view_change_missed(m: dict[str, Any]) -> bool:
     """Whether a mesh of bench/vs_vtk.py missed its view-change target (where one applies)."""
     t = m["target"]
@@ -337,7 +351,7 @@ def VALUES() -> dict[str, Callable[[], str]]:  # noqa: N802 - read like the TABL
         "table_filter": table_filter, "smooth_tf_psnr": smooth_tf_psnr, "framebuffer_vs_table": framebuffer_vs_table,
         "auto_table_sizes": auto_table_sizes, "table_build": table_build, "scalar_bins_auto": scalar_bins_auto,
         "align_nodes": align_nodes, "slices_vs_fixed": slices_vs_fixed, "centroid_sort": centroid_sort,
-        "large_meshes": large_meshes, "vs_vtk_pixels": vs_vtk_pixels, "march_lanes": march_lanes, "vs_vtk_below_90": vs_vtk_below_90, "vs_vtk_missed": vs_vtk_missed,
+        "large_meshes": large_meshes, "vs_vtk_pixels": vs_vtk_pixels, "march_lanes": march_lanes, "march_parts": march_parts, "vs_vtk_below_90": vs_vtk_below_90, "vs_vtk_missed": vs_vtk_missed,
         "spiky_even": spiky_even, "rings_bricks": rings_bricks,
         "anatomy_own": anatomy_own, "anatomy_convention": anatomy_convention, "anatomy_colour": anatomy_colour,
         "install_time": install_time, "extras_sizes": extras_sizes, "notebook_times": notebook_times}
