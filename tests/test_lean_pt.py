@@ -201,3 +201,30 @@ def test_only_the_fans_between_the_first_and_last_exact_take_the_exact_branch(mo
         want = r.render(mesh, near_corner, tf, size=(64, 64))
     assert want[..., 3].max() > 0.2
     assert np.array_equal(got, want)
+
+
+def test_the_depth_pass_draws_the_near_plane_tets_by_their_own_program():
+    """Fusion's depth extent draws every fan but the exact ones with one program and the
+    exact ones (here the tets the near plane cuts) with the other: together, the reference's
+    nearest entry and farthest exit, clipped to the clipping range."""
+    from tetvr.reference.segments import ray_segments
+
+    mesh = synthetic.cube(4)
+    cam = Camera(position=(1.6, 1.2, 1.9), focal_point=(0.0, 0.0, 0.0), view_angle=40.0, clipping_range=(2.2, 8.0))
+    size = (64, 48)
+    with tetvr.Renderer(PT) as r:
+        front, back = r.depth_extent(mesh, cam, size=size)
+        _, exact, _ = _fan_vertices(r, mesh.n_tets)
+    assert (exact[:, 0] >= 0).any() and (exact[:, 0] < 0).any()
+    seg = ray_segments(mesh, cam, size)
+    want_front = np.full(size[0] * size[1], np.inf)
+    want_back = np.full(size[0] * size[1], -np.inf)
+    np.minimum.at(want_front, seg.pixel, seg.t_in)
+    np.maximum.at(want_back, seg.pixel, seg.t_out)
+    want_front, want_back = want_front.reshape(size[1], size[0]), want_back.reshape(size[1], size[0])
+    covered = np.isfinite(want_front)
+    assert covered.mean() > 0.2 and np.any(want_front[covered] == 2.2)  # the near plane cuts some rays' entries
+    assert np.mean(np.isfinite(front) == covered) > 0.99  # but where a pixel centre grazes the silhouette
+    both = covered & np.isfinite(front)
+    assert np.abs(front[both] - want_front[both]).max() < 1e-4 * 8.0
+    assert np.abs(back[both] - want_back[both]).max() < 1e-4 * 8.0

@@ -33,7 +33,7 @@ from tetvr.gl.context import create_context, describe
 from tetvr.gl.interpolation import exactness_defines
 from tetvr.gl.shaders import ShaderCompileError, assemble, explain
 from tetvr.order.method import choose, march_fits, view_dependent
-from tetvr.gl.projected import ProjectedCells, exact_runs
+from tetvr.gl.projected import ProjectedCells, depth_pass, exact_runs
 from tetvr.gl.framesize import frame_method
 from tetvr.gl.raymarch import Marcher, raymarch_capacity
 from tetvr.gl.selfcheck import retrace, retrace_extent
@@ -571,25 +571,9 @@ class Renderer(GLOwner):
 
     def _depth_extent(self, mesh: TetMesh, camera: Camera, size: tuple[int, int]
                       ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        import moderngl
-
         size = self._check(size)
         uniforms = self._view_uniforms(mesh, camera, size)
-        prog = self._program("depth", PERSPECTIVE_CORRECT=int(self.settings.perspective_correct),
-                             PERSPECTIVE=int(not camera.parallel_projection))
-        set_uniforms(prog, **uniforms)
-        fbo = self._use_target(size, 2)
-        fbo.use()
-        fbo.clear(3e38, 3e38, 0.0, 0.0)
-        # Any order will do: MIN blending is commutative.
-        for n in self._chunks(mesh, np.arange(mesh.n_tets, dtype=np.uint32)):
-            # The depth pass reads no table coordinates: the table's uniforms do not matter.
-            self._classify(n, uniforms, perspective_correct=int(self.settings.perspective_correct))
-            self._draw(prog, fbo, n, ((moderngl.ONE, moderngl.ONE), moderngl.MIN))
-        ext = self._read(fbo, size, 2)
-        front = np.where(ext[..., 0] >= 3e38, np.inf, ext[..., 0]).astype(np.float32)
-        back = np.where(ext[..., 1] >= 3e38, -np.inf, -ext[..., 1]).astype(np.float32)
-        return front, back
+        return depth_pass(self, mesh, size, uniforms, perspective=int(not camera.parallel_projection))
 
 
 def _outside_clipping_range(mesh: TetMesh, camera: Camera) -> tuple[bool, bool]:
