@@ -72,16 +72,16 @@ class CostModel:
 #: 512x512 and 1024x1024; relative least squares, coefficients non-negative) with the
 #: estimates below (:func:`segments_per_tet`, :func:`entering_rays`) as its inputs;
 #: bench/results/cost_model.json holds the fit and its error per scene.
-LLVMPIPE = CostModel(march_ns_per_segment=15.4, march_ns_per_ray=196.0, march_ns_per_tet=114.0,
-                     projected_ns_per_tet=1630.0, projected_ns_per_fragment=16.2,
-                     projected_ns_per_frame=45.9e6)
+LLVMPIPE = CostModel(march_ns_per_segment=14.0, march_ns_per_ray=166.0, march_ns_per_tet=121.0,
+                     projected_ns_per_tet=1510.0, projected_ns_per_fragment=15.2,
+                     projected_ns_per_frame=24.7e6)
 #: "auto" takes projected tetrahedra for speed only where the model predicts them this
 #: much faster: a near tie goes to tet marching, the more accurate method on real meshes
 #: at large sizes (bench/results/speed_accuracy.json, the beam at 1024x1024: projected
 #: tetrahedra's largest error ten times tet marching's). Chosen on the fit's and the
 #: held-out scenes of bench/results/cost_model.json: within the model's scatter there,
 #: and no scene loses more than a few per cent against the faster method.
-AUTO_MARGIN = 1.1
+AUTO_MARGIN = 1.2
 #: Host memory tet marching takes per tet for a mesh's first frame on llvmpipe, which keeps
 #: GL textures in host memory: the records, the face adjacency and its temporaries
 #: (bench/results/frame_memory.json: 330 B a tet measured on 105k and 413k tets, beside the
