@@ -105,7 +105,7 @@ INSIDE_STEP = 10.0
 #: inside at 1024x1024 takes minutes).
 INSIDE_ACCURACY_SIZE = (256, 256)
 RENDERERS = ("tetvr", "tetvr_projected", "tetvr_parity", "vtk_pt")
-LABELS = {"tetvr": "tetvr (default: auto -> tet marching)", "tetvr_projected": "tetvr projected tetrahedra",
+LABELS = {"tetvr": "tetvr default (method=\"auto\")", "tetvr_projected": "tetvr projected tetrahedra",
           "tetvr_parity": "tetvr, VTK parity", "vtk_pt": "VTK projected tetra"}
 
 
