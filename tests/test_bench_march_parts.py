@@ -3,6 +3,9 @@ as they are now (a substitution that stopped matching would measure nothing)."""
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import pytest
 
 import tetvr.gl.shaders as shaders
@@ -13,6 +16,9 @@ from .test_bench_speed_charts import _load
 
 def test_every_substitution_matches_its_shader_once():
     march_parts = _load("march_parts")
+    # Importing it leaves the path alone: Dask's workers, started later by other tests,
+    # would import bench/distributed.py as their own package.
+    assert not any(Path(p).resolve() == Path(march_parts.__file__).parent for p in sys.path if p)
     assert "whole" in march_parts.VARIANTS and len(march_parts.VARIANTS) > 1
     for variant, edits in march_parts.VARIANTS.items():
         for name, pairs in edits.items():
