@@ -248,26 +248,27 @@ def time_frames(frames: dict[str, Any], camera: Camera, repeats: int) -> tuple[d
     return out, rounds
 
 
-def resolved(s: RenderSettings, mesh, tf) -> RenderSettings:
-    """The settings with ``sort="auto"`` and an "auto" table size made concrete for this scene."""
+def resolved(s: RenderSettings, mesh, tf, camera=None, image_size=None) -> RenderSettings:
+    """The settings with ``method="auto"`` (for this view, where given: the cost model may
+    choose by it), ``sort="auto"`` and an "auto" table size made concrete for this scene."""
     size = resolve_table_size(s, tf, mesh)
     # Aligned nodes that land where uniform ones do are the same table.
     rng = table_scalar_range(mesh.scalar_range, tf)
     align = s.table_align_nodes and aligned_scalar_range(rng, tf, size.n_bins) != rng
-    return dataclasses.replace(s, method=choose(s, mesh), sort=auto_method(mesh) if s.sort == "auto" else s.sort,
+    return dataclasses.replace(s, method=choose(s, mesh, camera, image_size), sort=auto_method(mesh) if s.sort == "auto" else s.sort,
                                table_scalar_bins=size.n_bins, table_thickness_slices=size.n_slices,
                                table_log_base=round(size.log_base, 9), table_tolerance=1.0, table_align_nodes=align)
 
 
-def same_as_default(vs: dict[str, RenderSettings], mesh, tf) -> dict[str, str]:
+def same_as_default(vs: dict[str, RenderSettings], mesh, tf, camera=None, size=None) -> dict[str, str]:
     """Variants that are the default itself in this scene once ``method="auto"``,
     ``sort="auto"`` and the "auto" table size are resolved (e.g. ``tet marching`` where
     auto picks it, ``N=512`` where the auto size is 512 bins): timing them again only adds
     noise, and one of two identical settings would "beat" the other by chance."""
-    mine = resolved(DEFAULT, mesh, tf)
+    mine = resolved(DEFAULT, mesh, tf, camera, size)
     why = (f"identical to the default here (method=auto picks {mine.method}, sort=auto {mine.sort}; the auto table is "
            f"N={mine.table_scalar_bins}, K={mine.table_thickness_slices})")
-    return {key: why for key, s in vs.items() if key != "default" and resolved(s, mesh, tf) == mine}
+    return {key: why for key, s in vs.items() if key != "default" and resolved(s, mesh, tf, camera, size) == mine}
 
 
 def table_times(vs, mesh, tf) -> dict[str, float]:
@@ -398,7 +399,7 @@ def measure_scene(mesh, cam, tf, size, vs, renderers, repeats, with_peers) -> tu
     t0 = time.perf_counter()
     ref = render_reference(mesh, cam, tf, size)
     ref_s = time.perf_counter() - t0
-    dup = same_as_default(vs, mesh, tf)
+    dup = same_as_default(vs, mesh, tf, cam, size)
     frames: dict[str, Any] = {k: TetvrFrames(renderers[k], mesh, tf, size) for k in vs if k not in dup}
     started, peer_failed = peers.open_peers(mesh, tf, size) if with_peers else ({}, {})
     try:
