@@ -72,7 +72,10 @@ def scene_rows(results: Path, known: list[dict[str, Any]] = ()) -> list[dict[str
     from tetvr.apps.vtkcompare import orbit
 
     loaders = dict(vs_vtk._mesh_specs(False, vs_vtk.DEFAULT_DATA)[0])
-    kept = {(r["name"], r["size"][0], r["measured_s"]["raymarch"], r["measured_s"]["projected"]): r for r in known}
+    def key(name: str, size: int, measured: dict[str, float]) -> tuple[Any, ...]:
+        return name, size, measured["raymarch"], measured["projected"]
+
+    kept = {key(r["name"], r["size"][0], r["measured_s"]): r for r in known}
     timed: dict[str, list[tuple[dict[str, Any], dict[str, Any], dict[str, float]]]] = {}
     for run in RUNS:
         res = json.loads((results / run).read_text())
@@ -85,8 +88,8 @@ def scene_rows(results: Path, known: list[dict[str, Any]] = ()) -> list[dict[str
                 timed.setdefault(m["name"], []).append((res, m, measured))
     rows = []
     for name, records in timed.items():
-        todo = [rec for rec in records if (name, rec[0]["size"][0], *rec[2].values()) not in kept]
-        rows.extend(kept[(name, rec[0]["size"][0], *rec[2].values())] for rec in records if rec not in todo)
+        rows.extend(kept[k] for k in (key(name, res["size"][0], measured) for res, _, measured in records) if k in kept)
+        todo = [rec for rec in records if key(name, rec[0]["size"][0], rec[2]) not in kept]
         if not todo or name not in loaders:
             continue
         mesh = loaders[name]()

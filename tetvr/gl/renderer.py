@@ -32,7 +32,7 @@ from tetvr.optics.transfer import TransferFunction
 from tetvr.gl.context import create_context, describe
 from tetvr.gl.interpolation import exactness_defines
 from tetvr.gl.shaders import ShaderCompileError, assemble, explain
-from tetvr.order.method import choose, march_fits, view_dependent
+from tetvr.order.method import choose, march_fits
 from tetvr.gl.projected import ProjectedCells, depth_pass, exact_runs
 from tetvr.gl.framesize import frame_method
 from tetvr.gl.raymarch import Marcher, raymarch_capacity
@@ -476,11 +476,13 @@ class Renderer(GLOwner):
             # The walk check choose() reads (and, meanwhile, the records on the GL: tetvr.gl.raymarch).
             upload = choose(self.settings) == "raymarch"
             self._marcher.settle(mesh, keep=upload, upload=upload)
-        if choose(self.settings, mesh, camera, size) != "raymarch":
-            if self._marcher is not None and not view_dependent(self.settings, mesh):  # else the next view may march
+        if choose(self.settings, mesh) != "raymarch":  # the mesh itself goes to projected tetrahedra
+            if self._marcher is not None:
                 self._marcher.settle(mesh, keep=False)
                 self._marcher.drop_unused(mesh)
             return False
+        if camera is not None and choose(self.settings, mesh, camera, size) != "raymarch":
+            return False  # this view alone (the cost model): the records stay for the next that marches
         fits = mesh.n_tets <= raymarch_capacity(int(self.ctx.info.get("GL_MAX_TEXTURE_SIZE", 16384)))
         if not fits and self.settings.method == "raymarch":
             raise MemoryError(f"the mesh has {mesh.n_tets} tets, more than the ray caster holds in one texture on "

@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 
 __all__ = ["choose", "segments_per_tet", "entering_rays", "predicted_seconds", "order_exact", "CostModel",
            "LLVMPIPE", "AUTO_MARGIN", "RAYMARCH_ONLY", "PROJECTED_ONLY", "AUTO_MAX_TETS", "MARCH_BYTES_PER_TET",
-           "MARCH_MEMORY_SHARE", "march_fits", "view_dependent"]
+           "MARCH_MEMORY_SHARE", "march_fits"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -161,24 +161,6 @@ def choose(settings: RenderSettings, mesh: "TetMesh | None" = None, camera: "Cam
             if AUTO_MARGIN * cost["projected"] < cost["raymarch"]:
                 return "projected"
     return "raymarch"
-
-
-def view_dependent(settings: RenderSettings, mesh: "TetMesh") -> bool:
-    """Whether "auto" chooses per view for ``mesh`` under ``settings`` (:func:`choose`):
-    tet marching can render it (the walk check passes, the records fit in memory) and
-    projected tetrahedra's order would be exact, so that the cost model decides. A
-    renderer keeps the mesh's tet-marching records across views that take projected
-    tetrahedra only then.
-
-    Examples
-    --------
-    >>> from tetvr.mesh import synthetic
-    >>> cube = synthetic.cube(3)
-    >>> view_dependent(RenderSettings(), cube), view_dependent(RenderSettings(optics="vtk"), cube)
-    (True, False)
-    """
-    return (settings.method == "auto" and choose(settings) == "raymarch" and march_fits(mesh.n_tets)
-            and not walk_check(mesh).reasons and order_exact(settings, mesh))
 
 
 def march_fits(n_tets: int, available: int | None = -1) -> bool:
