@@ -227,6 +227,24 @@ def march_parts() -> str:
             f"frames each, `bench/results/march_parts.json`) is shorter by: {'; '.join(parts)}")
 
 
+def tile_coherence() -> str:
+    """bench/README.md: how often a tile's corner rays cross the same cells (bench/tile_coherence.py)."""
+    r = _load(RESULTS / "tile_coherence.json")
+    meshes = r["meshes"]
+    tiles = sorted(meshes[0]["tiles"], key=int)
+    adjacent = sorted(m["adjacent"] for m in meshes)
+    most = max(meshes, key=lambda m: m["adjacent"])["name"].split(" (")[0]
+    parts = []
+    for s in tiles:
+        seg = sorted(m["tiles"][s]["segments_skipped"] for m in meshes)
+        parts.append(f"{s}x{s} tiles {seg[0]:.2%}–{seg[-1]:.2%} (median {statistics.median(seg):.2%})")
+    return (f"at {r['size'][0]}x{r['size'][1]} (the fitted view, the {len(meshes)} meshes of "
+            f"`bench/results/tile_coherence.json`, from the exact reference's segments) a pixel's right neighbour "
+            f"crosses the same cells for {adjacent[0]:.1%}–{adjacent[-1]:.1%} of pixels (median "
+            f"{statistics.median(adjacent):.1%}; the most on {most}), and the rays of the tiles whose four corner "
+            f"rays agree hold, of all the segments: {'; '.join(parts)}")
+
+
 def view_change_missed(m: dict[str, Any]) -> bool:
     """Whether a mesh of bench/vs_vtk.py missed its view-change target (where one applies)."""
     t = m["target"]
@@ -351,7 +369,7 @@ def VALUES() -> dict[str, Callable[[], str]]:  # noqa: N802 - read like the TABL
         "table_filter": table_filter, "smooth_tf_psnr": smooth_tf_psnr, "framebuffer_vs_table": framebuffer_vs_table,
         "auto_table_sizes": auto_table_sizes, "table_build": table_build, "scalar_bins_auto": scalar_bins_auto,
         "align_nodes": align_nodes, "slices_vs_fixed": slices_vs_fixed, "centroid_sort": centroid_sort,
-        "large_meshes": large_meshes, "vs_vtk_pixels": vs_vtk_pixels, "march_lanes": march_lanes, "march_parts": march_parts, "vs_vtk_below_90": vs_vtk_below_90, "vs_vtk_missed": vs_vtk_missed,
+        "large_meshes": large_meshes, "vs_vtk_pixels": vs_vtk_pixels, "march_lanes": march_lanes, "march_parts": march_parts, "tile_coherence": tile_coherence, "vs_vtk_below_90": vs_vtk_below_90, "vs_vtk_missed": vs_vtk_missed,
         "spiky_even": spiky_even, "rings_bricks": rings_bricks,
         "anatomy_own": anatomy_own, "anatomy_convention": anatomy_convention, "anatomy_colour": anatomy_colour,
         "install_time": install_time, "extras_sizes": extras_sizes, "notebook_times": notebook_times}
