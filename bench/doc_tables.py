@@ -56,8 +56,11 @@ def methods_vs_vtk(name: str = "vs_vtk.json") -> str:
                     f"| {v['vtk_pt'] * 1e3:.0f} | {s['tetvr']:.2f} | {s['tetvr_projected']:.2f} |{extra}"
                     f" {p['tetvr']['exact']:.1f} | {p['tetvr_projected']['exact']:.1f} | {p['vtk_pt']['exact']:.1f} |")
     size = "x".join(str(x) for x in r["size"])
+    counts = {len(m.get("first_frame_samples_s", {}).get("tetvr", [None])) for m in r["meshes"]}
+    firsts = (f"first frames the median of {counts.pop()} of the default and of VTK's, each on the mesh loaded "
+              f"again, " if first and len(counts) == 1 and min(counts) > 1 else "")
     return (f"{size}; default: `method=\"auto\"` (tet marching unless the scene needs projected tetrahedra or the cost model predicts them clearly faster, see above); "
-            f"median of {r['repeats']} view changes, frames in turn, {r.get('gl_renderer', '?')}, "
+            f"median of {r['repeats']} view changes, frames in turn, {firsts}{r.get('gl_renderer', '?')}, "
             f"VTK {r.get('vtk_version', '?')}; PSNR (dB) of premultiplied RGB against the exact reference "
             f"({r['date']}, `bench/results/{name}`).\n\n" + "\n".join(rows))
 

@@ -24,6 +24,11 @@
 // result is of the order of its optical depth, and float32 leaves ~1e-7 of each term in
 // it, 5e-6 over a run of 512 bins (measured); the CPU build's float64 leaves 1e-16.
 // GLSL has no double exp, so dexpm1() reduces by ln 2 and sums the Taylor series.
+// Each bin's colour for the invocation's step length is computed once: kept in a ring of
+// RING entries (a power of two, at least the bins: tetvr.gl.tablebuild), it is read again
+// when the bin leaves the run n steps later; and the run's opacity comes from the
+// transmittances already at hand, e^(a + b) - 1 = (e^a - 1) + (e^b - 1) + (e^a - 1)(e^b - 1),
+// which keeps its precision where both are small (a thin run), as expm1 does.
 
 layout(local_size_x = 64) in;
 
@@ -45,12 +50,10 @@ dvec4 load_bin(int b, int part) {
 #define MAX_STORED_TAU 1.0e30LF
 const double LN2 = 0.6931471805599453094LF;
 
-// e^x - 1 for |x| <= ln 2 / 2, by its Taylor series to x^14 (the next term is below 1e-17).
+// e^x - 1 for |x| <= ln 2 / 2, by its Taylor series to x^11 (the next term is below 3e-14
+// of the sum; the table keeps float32).
 double expm1_series(double x) {
-    double s = 1.0LF / 87178291200.0LF;  // 1 / 14!
-    s = s * x + 1.0LF / 6227020800.0LF;
-    s = s * x + 1.0LF / 479001600.0LF;
-    s = s * x + 1.0LF / 39916800.0LF;
+    double s = 1.0LF / 39916800.0LF;  // 1 / 11!
     s = s * x + 1.0LF / 3628800.0LF;
     s = s * x + 1.0LF / 362880.0LF;
     s = s * x + 1.0LF / 40320.0LF;
@@ -64,7 +67,7 @@ double expm1_series(double x) {
     return s * x;
 }
 
-// e^x - 1 for x <= 0, to ~1e-16 relative (x = k ln 2 + r, |r| <= ln 2 / 2), accurate near 0.
+// e^x - 1 for x <= 0, to ~3e-14 relative (x = k ln 2 + r, |r| <= ln 2 / 2), accurate near 0.
 double dexpm1(double x) {
     if (x >= -0.5LF * LN2) return expm1_series(x);
     if (x < -700.0LF) return -1.0LF;  // e^x below 1e-304: nothing the table keeps
@@ -73,14 +76,14 @@ double dexpm1(double x) {
 }
 
 // The premultiplied colour of bin b crossed from its start to its end (forwards; the
-// mirrored axis crosses it from its end to its start) in length `step`, and its
-// transmittance.
-dvec3 bin_colour(int b, double step, bool forwards, out double t) {
+// mirrored axis crosses it from its end to its start) in length `step`, and e^-(its optical
+// depth) - 1.
+dvec3 bin_colour(int b, double step, bool forwards, out double em1) {
     dvec4 p = load_bin(b, 0), q = load_bin(b, 1);
     dvec3 c0 = forwards ? p.xyz : q.xyz, c1 = forwards ? q.xyz : p.xyz;
     double th = p.w * step;
-    double em1 = dexpm1(-th);
-    t = 1.0LF + em1;
+    em1 = dexpm1(-th);
+    double t = 1.0LF + em1;
     double phi = th > 1.0e-12LF ? -em1 / th : 1.0LF - 0.5LF * th;
     return th > 0.0LF ? c0 - c1 * t + (c1 - c0) * phi : dvec3(0.0LF);
 }
@@ -92,20 +95,24 @@ void main() {
     if (n > nb) return;
     double thick = packDouble2x32(imageLoad(u_thicks, ivec2(k, 0)).xy), step = thick / double(n);
     dvec3 w = dvec3(0.0LF);
-    double t;
+    dvec3 ring[RING];  // bin i's colour at i % RING
+    double em1;
+    double run = 0.0LF;  // e^-(the optical depth of the bins from node i on in the run) - 1
     for (int i = nb - 1; i >= 0; --i) {
         if (i + n <= nb - 1) {
             // The bin leaving the run at its back, behind bins i+1 .. i+n-1.
-            int leaving = forwards ? i + n : nb - 1 - i - n;
             double between = forwards ? u_prefix(i + n) - u_prefix(i + 1) : u_prefix(nb - i - 1) - u_prefix(nb - i - n);
-            w -= (1.0LF + dexpm1(-step * between)) * bin_colour(leaving, step, forwards, t);
+            run = dexpm1(-step * between);
+            w -= (1.0LF + run) * ring[(i + n) & (RING - 1)];
         }
-        dvec3 c = bin_colour(forwards ? i : nb - 1 - i, step, forwards, t);
-        w = w * t + c;
+        dvec3 c = bin_colour(forwards ? i : nb - 1 - i, step, forwards, em1);
+        ring[i & (RING - 1)] = c;
+        w = w * (1.0LF + em1) + c;
+        run = em1 + run + em1 * run;  // through bin i
         if (i + n <= nb) {
             int sf = forwards ? i : nb - i, sb = forwards ? i + n : nb - i - n;
             double mean = abs(u_prefix(sb) - u_prefix(sf)) / double(n);
-            double alpha = -dexpm1(-thick * mean);
+            double alpha = -run;
             dvec3 chroma = alpha > 1.0e-300LF ? clamp(max(w, 0.0LF) / alpha, 0.0LF, 1.0LF) : dvec3(0.0LF);
             u_out[(sb * nodes + sf) * (int(gl_NumWorkGroups.y) + 1) + k + 1] = vec4(vec3(chroma), float(min(mean, MAX_STORED_TAU)));
         }

@@ -27,7 +27,7 @@ def runs():
     from tetvr.gl.tablebuild import TableRuns
 
     for r in gl_object(Renderer, "no OpenGL 4.3 context"):
-        yield TableRuns(r.ctx, lambda: r._program("table_runs"))
+        yield TableRuns(r.ctx, lambda ring: r._program("table_runs", RING=ring))
 
 
 def _assert_same(gpu, cpu):
@@ -52,11 +52,24 @@ def _assert_same(gpu, cpu):
     (SPIKY, 2.0, 200, 16, "exact"),  # optical depths past 700: transmittance 0
     (SPIKY, 1e-6, 64, 8, "exact"),  # every bin thin: the terms of order one cancel
     (SMOOTH, 0.3, 128, 8, "linear"),
+    (SPIKY, 0.5, 513, 4, "exact"),  # 512 bins: runs as long as the ring (table_runs.comp's RING)
+    (SPIKY, 0.5, 514, 2, "exact"),  # 513 bins: the next ring
+    (SMOOTH, 0.3, 2048, 2, "exact"),  # the most bins RenderSettings allows
+
     (_paraview_map((0.0, 1.0), bands=32), 0.5, 256, 8, "exact"),  # steps on nodes: bins' ends differ
 ])
 def test_the_gpu_builds_the_cpus_table(runs, tf, d_max, n_bins, n_slices, optics):
     kw = dict(n_bins=n_bins, n_slices=n_slices, log_base=1.7, optics=optics)
     _assert_same(build_table(tf, (0.0, 1.0), d_max, runs=runs, **kw), build_table(tf, (0.0, 1.0), d_max, **kw))
+
+
+def test_the_ring_holds_every_run():
+    from tetvr.gl.tablebuild import ring_size
+
+    for n in (1, 2, 255, 256, 257, 512, 513, 2048, 2060):
+        ring = ring_size(n)
+        assert ring >= n and ring & (ring - 1) == 0 and ring >= 256
+    assert ring_size(512) == 512 and ring_size(513) == 1024
 
 
 class _Spy:

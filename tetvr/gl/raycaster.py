@@ -273,11 +273,12 @@ class Raycaster(GLOwner):
         self._table_checked = key
         return table
 
-    def _runs_program(self) -> Any:
+    def _runs_program(self, ring: int) -> Any:
         """The compiled ``table_runs.comp`` (the table's runs on the GPU: :mod:`tetvr.gl.tablebuild`)."""
-        if ("table_runs",) not in self._programs:
-            self._programs[("table_runs",)] = compile_runs(self.ctx)
-        return self._programs[("table_runs",)]
+        key = ("table_runs", ring)
+        if key not in self._programs:
+            self._programs[key] = compile_runs(self.ctx, ring)
+        return self._programs[key]
 
     def _check_table(self, n_bins: int, n_slices: int) -> None:
         """Refuse a table this GL cannot hold, or this machine cannot build, before any

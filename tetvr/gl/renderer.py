@@ -260,7 +260,7 @@ class Renderer(GLOwner):
         table = table_for(tf, mesh.scalar_range, mesh.max_edge, n_bins=size.n_bins, n_slices=size.n_slices,
                           log_base=size.log_base, encoding=s.table_encoding, dtype=s.table_dtype, optics=s.optics,
                           align_nodes=s.table_align_nodes, warp=size.warp,
-                          runs=TableRuns(self.ctx, lambda: self._program("table_runs")))
+                          runs=TableRuns(self.ctx, lambda ring: self._program("table_runs", RING=ring)))
         self._table_cache = (key, table)
         return table
 

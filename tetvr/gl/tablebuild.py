@@ -26,15 +26,23 @@ from tetvr.gl.context import current_in_thread
 from tetvr.gl.shaders import ShaderCompileError, assemble, explain
 from tetvr.gl.util import clear_gl_errors
 
-__all__ = ["TableRuns", "compile_runs"]
+__all__ = ["TableRuns", "compile_runs", "ring_size"]
 
 #: Invocations per work group (``local_size_x`` in table_runs.comp).
 _GROUP = 64
 
 
-def compile_runs(ctx: Any) -> Any:
-    """``table_runs.comp`` compiled in ``ctx`` (the caller owns the program)."""
-    src, files = assemble("table_runs.comp")
+def ring_size(n_bins: int) -> int:
+    """``table_runs.comp``'s ``RING`` for a table of ``n_bins`` bins: the least power of two
+    at least the bins (a bin's colour is read back at most ``n_bins`` steps after it is
+    kept), and at least 256, so that few programs serve every table."""
+    return max(256, 1 << max(int(n_bins) - 1, 1).bit_length())
+
+
+def compile_runs(ctx: Any, ring: int) -> Any:
+    """``table_runs.comp`` compiled in ``ctx`` with ``RING`` ``ring`` (:func:`ring_size`;
+    the caller owns the program)."""
+    src, files = assemble("table_runs.comp", {"RING": ring})
     try:
         return ctx.compute_shader(src)
     except Exception as exc:
@@ -45,6 +53,7 @@ class TableRuns:
     """Builds the runs of pre-integration tables with a GL context and the compiled
     ``table_runs.comp`` (``program()`` gives it), neither of which it owns.
 
+    ``program(ring)`` gives the program compiled with ``RING`` ``ring`` (:func:`ring_size`).
     An instance is what :func:`~tetvr.optics.preintegrate.build_table` takes as ``runs``:
     called with each bin's colour at its start and end, its mean extinction, the prefix
     sum of those, and the slices' thicknesses, it writes slices 1..K's off-diagonal entries
@@ -52,7 +61,7 @@ class TableRuns:
     texture's layout); what it leaves there (slice 0, the diagonal) is undefined.
     """
 
-    def __init__(self, ctx: Any, program: Callable[[], Any]) -> None:
+    def __init__(self, ctx: Any, program: Callable[[int], Any]) -> None:
         self.ctx = ctx
         self._program = program
 
@@ -65,7 +74,7 @@ class TableRuns:
         bins = np.zeros((nb, 2, 4))
         bins[:, 0, :3], bins[:, 0, 3], bins[:, 1, :3] = start, tau_bin, end
         with current_in_thread(self.ctx):
-            program = self._program()
+            program = self._program(ring_size(nb))
             objects: list[Any] = []
             try:
                 # Doubles as pairs of uints: 4 RGBA texels a bin, one RG texel per prefix or thickness.
