@@ -97,6 +97,8 @@ def test_reference_pixels_of_a_few_pixels_cull_no_tet_they_need(monkeypatch, vie
         monkeypatch.setattr(run_boxes, "MIN_TETS", 0)
         monkeypatch.setattr(run_boxes, "RUN", 8)
     mesh = synthetic.torus()
+    if boxes:
+        run_boxes.tet_boxes(mesh)  # else a mesh's first pixels are found tet by tet
     camera = tetvr.Camera.fit(mesh, direction=(0.3, -0.8, -0.5), parallel=view == "parallel")
     if view == "inside":  # the eye in the tube: the near plane cuts cells
         camera = tetvr.Camera(position=(1.0, 0.0, 0.05), focal_point=(1.0, 1.0, 0.0), view_angle=70.0)
@@ -129,6 +131,42 @@ def test_runs_boxes_keep_every_tet_a_pixel_may_need_and_few_others():
         needed = np.flatnonzero(_may_cover(pts, mesh.tets, rays, held))
         assert needed.size > 0 and np.isin(needed, some).all()
         assert some.size < mesh.n_tets / 4
+
+
+def test_a_mesh_s_first_pixels_are_found_tet_by_tet_while_its_boxes_are_built(monkeypatch):
+    """Without its boxes yet, a mesh's pixels are found by projecting every tet (cheaper
+    than the boxes), and the boxes are built in the background for the frames after."""
+    import threading
+
+    from tetvr.core.camera import resolve_clipping_range
+    from tetvr.core.rays import EyeRays
+    from tetvr.reference import boxes as run_boxes
+    from tetvr.reference.segments import _held_by, _pixel_coords
+
+    mesh = synthetic.cube(20)
+    camera = resolve_clipping_range(tetvr.Camera.fit(mesh), mesh.bounds)
+    rays = EyeRays.from_camera(camera, 64, 64)
+    view = camera.view_matrix()
+    args = (mesh, np.asarray(camera.position, dtype=np.float64), view[:3, :3], rays, _pixel_coords,
+            _held_by(np.array([64 * 32 + 32]), rays))
+    built = threading.Event()
+    real = run_boxes.TetBoxes
+
+    def slow(m):
+        built.wait(10)  # held until the test has seen the first answer
+        return real(m)
+
+    monkeypatch.setattr(run_boxes, "TetBoxes", slow)
+    assert run_boxes.candidates(*args, wait=False) is None
+    assert run_boxes.candidates(*args, wait=False) is None  # still building: one thread
+    assert [t.name for t in threading.enumerate()].count("tetvr-boxes") == 1
+    built.set()
+    for t in threading.enumerate():
+        if t.name == "tetvr-boxes":
+            t.join(10)
+    some = run_boxes.candidates(*args, wait=False)
+    assert some is not None and 0 < some.size < mesh.n_tets / 4
+    np.testing.assert_array_equal(some, run_boxes.candidates(*args))
 
 
 def test_rays_past_the_last_layer_are_traced_again(monkeypatch):

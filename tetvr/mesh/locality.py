@@ -51,15 +51,43 @@ def morton_order(points: NDArray[np.float64], bits: int = BITS) -> NDArray[np.in
     [1, 2, 0]
     """
     p = np.asarray(points, dtype=np.float64)
+    n = p.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=np.intp)
     lo, hi = p.min(axis=0), p.max(axis=0)
     span = float((hi - lo).max())
     scale = (2**bits - 1) / span if span > 0 else 0.0
-    q = np.clip((p - lo) * scale, 0, 2**bits - 1).astype(np.uint64)
-    code = np.zeros(p.shape[0], dtype=np.uint64)
-    for b in range(bits):
-        for axis in range(3):
-            code |= ((q[:, axis] >> np.uint64(b)) & np.uint64(1)) << np.uint64(3 * b + axis)
-    return np.argsort(code, kind="stable")
+    f = p - lo  # >= 0: lo is the least
+    f *= scale
+    np.minimum(f, 2**bits - 1, out=f)
+    index_bits = max(1, (n - 1).bit_length())
+    if bits > 21 or 3 * bits + index_bits > 64:  # bit by bit, and a stable sort
+        q = f.astype(np.uint64)
+        code = np.zeros(n, dtype=np.uint64)
+        for b in range(bits):
+            for axis in range(3):
+                code |= ((q[:, axis] >> np.uint64(b)) & np.uint64(1)) << np.uint64(3 * b + axis)
+        return np.argsort(code, kind="stable")
+    # Bit b of axis a goes to bit 3b + a: each axis's bits spread two apart by shifts and
+    # masks (in 32-bit words where the code fits one). The index below the code makes every
+    # key distinct, so that any sort keeps points in one lattice cell in their order, and
+    # the sorted keys hold the order itself.
+    word, spread = (np.uint32, _SPREAD_32) if 3 * bits <= 32 else (np.uint64, _SPREAD_64)
+    q = f.astype(word)
+    code = np.zeros(n, dtype=word)
+    for axis in range(3):
+        x = np.ascontiguousarray(q[:, axis])
+        for shift, mask in spread:
+            x = (x | (x << word(shift))) & word(mask)
+        code |= x << word(axis)
+    key = np.sort((code.astype(np.uint64) << np.uint64(index_bits)) | np.arange(n, dtype=np.uint64))
+    return (key & np.uint64((1 << index_bits) - 1)).astype(np.intp)
+
+
+#: The shifts and masks that spread the low 21 (10) bits of a 64-bit (32-bit) word to every third bit.
+_SPREAD_64 = ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F), (4, 0x10C30C30C30C30C3),
+              (2, 0x1249249249249249))
+_SPREAD_32 = ((16, 0x030000FF), (8, 0x0300F00F), (4, 0x030C30C3), (2, 0x09249249))
 
 
 def numbered_locally(mesh: TetMesh) -> bool:

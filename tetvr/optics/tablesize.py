@@ -203,7 +203,10 @@ def sample_segments(mesh: TetMesh, n: int = _N_SEGMENTS) -> SegmentSample:
         key ^= key >> np.uint64(29)
     per_cell = max(1, -(-n // mesh.n_tets))
     m = min(mesh.n_tets, max(1, n // per_cell))
-    order = np.lexsort((*tets.T[::-1], key))  # by hash, then ids: a total order of the cells
+    # The first m cells by hash, then ids (a total order of the cells): only the cells whose
+    # hash is at most the m-th smallest are sorted (the whole mesh took a second on 3M cells).
+    near = np.arange(mesh.n_tets) if m == mesh.n_tets else np.flatnonzero(key <= np.partition(key, m - 1)[m - 1])
+    order = near[np.lexsort((*tets[near].T[::-1], key[near]))]
     chosen = tets[order[:m]]
     rng = np.random.default_rng(int(key[order[0]] % np.uint64(2**63)))
     cells = np.repeat(chosen, per_cell, axis=0)

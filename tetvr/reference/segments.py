@@ -110,7 +110,8 @@ def _tet_geometry(mesh: TetMesh, camera: Camera, rays: EyeRays, pixels: Int | No
     ids = mesh.tets
     if pixels is not None:  # a few pixels of a large mesh: their tets first, cheaply
         held = _held_by(pixels, rays)
-        some = candidates(mesh, np.asarray(camera.position, dtype=np.float64), view[:3, :3], rays, _pixel_coords, held)
+        some = candidates(mesh, np.asarray(camera.position, dtype=np.float64), view[:3, :3], rays, _pixel_coords, held,
+                          wait=False)
         base = np.flatnonzero(_may_cover(pts, ids if some is None else ids[some], rays, held))
         if some is not None:
             base = some[base]
