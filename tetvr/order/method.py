@@ -72,9 +72,9 @@ class CostModel:
 #: 512x512 and 1024x1024; relative least squares, coefficients non-negative) with the
 #: estimates below (:func:`segments_per_tet`, :func:`entering_rays`) as its inputs;
 #: bench/results/cost_model.json holds the fit and its error per scene.
-LLVMPIPE = CostModel(march_ns_per_segment=14.0, march_ns_per_ray=166.0, march_ns_per_tet=121.0,
-                     projected_ns_per_tet=1510.0, projected_ns_per_fragment=15.2,
-                     projected_ns_per_frame=24.7e6)
+LLVMPIPE = CostModel(march_ns_per_segment=11.6, march_ns_per_ray=189.0, march_ns_per_tet=119.0,
+                     projected_ns_per_tet=1280.0, projected_ns_per_fragment=14.6,
+                     projected_ns_per_frame=18.7e6)
 #: "auto" takes projected tetrahedra for speed only where the model predicts them this
 #: much faster: a near tie goes to tet marching, the more accurate method on real meshes
 #: at large sizes (bench/results/speed_accuracy.json, the beam at 1024x1024: projected
