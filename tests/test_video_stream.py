@@ -214,3 +214,45 @@ def test_wait_and_as_completed_give_up_with_no_worker(monkeypatch):
         w.wait(c, [object()], "the steps", timeout=0.05)
     with pytest.raises(TimeoutError, match="the bricks: no Dask worker"):
         next(w.as_completed(c, [object()], "the bricks", timeout=0.05))
+
+
+def test_a_step_made_again_after_it_finished_waits_for_its_turn(monkeypatch):
+    """A step whose worker is lost between finishing and being looked at is made again
+    (its status no longer "finished"): in step order it still comes at its turn, once
+    (it had been handed out at once, ahead of its turn, and its turn then never came)."""
+    from concurrent.futures import CancelledError
+
+    from tetvr.cluster import timeseries, workers
+
+    class Future:
+        def __init__(self, i, status):
+            self.i, self.status = i, status
+
+        def result(self):
+            if self.status == "lost for good":
+                raise CancelledError
+            return f"frame {self.i}"
+
+    # Step 1 is looked at after its worker was lost (made again: "pending" until its result
+    # is asked for); step 0 finishes after it; a first try of step 2 is lost for good.
+    statuses = {(0, 0): "finished", (1, 0): "pending", (2, 0): "lost for good", (2, 1): "finished"}
+    sent, first = [], {}
+
+    class Sender:
+        def __init__(self, c, items, submit):
+            self.shared = {}
+
+        def __call__(self, i, tries):
+            sent.append((i, tries))
+            return Future(i, statuses[i, tries])
+
+    def as_completed(c, futures, what):
+        # The latest step first where two wait: step 1 before step 0.
+        yield max(futures, key=lambda f: f.i)
+
+    monkeypatch.setattr(timeseries, "_StepSender", Sender)
+    monkeypatch.setattr(workers, "as_completed", as_completed)
+    monkeypatch.setattr(workers, "wait", lambda c, futures, what: None)
+    got = list(timeseries._steps_done(None, [None] * 3, None, "the steps", window=2, ordered=True))
+    assert got == [(0, "frame 0"), (1, "frame 1"), (2, "frame 2")]
+    assert sent == [(0, 0), (1, 0), (2, 0), (2, 1)]

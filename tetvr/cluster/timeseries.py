@@ -313,12 +313,16 @@ def _steps_done(c: Any, items: list[_Step], submit: Callable[[Any, str, int, int
         if tries[i] > 2:
             raise exc
         send.shared.clear()
-        todo.append(i)  # sent again next: the step ``turn`` never waits for a place
+        todo.append(i)
+        todo.sort(reverse=True)  # the earliest is sent first: the step ``turn`` never waits for a place
 
     while todo or pending or done:
         while todo and (len(pending) + len(done) < window or (ordered and todo[-1] == turn)):
             i = todo.pop()
             pending[send(i, tries[i])] = i
+        if not pending and ordered and turn not in done and turn not in todo:
+            # Nothing would move: a bug, raised here rather than spinning for ever.
+            raise RuntimeError(f"{what}: step {turn} is neither sent, nor done, nor to send")
         if pending:
             fut = next(as_completed(c, list(pending), what))
             i = pending.pop(fut)
@@ -330,7 +334,10 @@ def _steps_done(c: Any, items: list[_Step], submit: Callable[[Any, str, int, int
                 except CancelledError as exc:
                     lost(i, exc)
                 else:
-                    yield i, value
+                    if ordered:  # finished again since (its worker was lost): its turn as the others'
+                        done[i] = fut
+                    else:
+                        yield i, value
             fut = value = None  # no frame kept here while the next is awaited
         while ordered and turn in done:
             fut = done.pop(turn)
