@@ -57,8 +57,9 @@ def methods_vs_vtk(name: str = "vs_vtk.json") -> str:
                     f" {p['tetvr']['exact']:.1f} | {p['tetvr_projected']['exact']:.1f} | {p['vtk_pt']['exact']:.1f} |")
     size = "x".join(str(x) for x in r["size"])
     counts = {len(m.get("first_frame_samples_s", {}).get("tetvr", [None])) for m in r["meshes"]}
-    firsts = (f"first frames the median of {counts.pop()} of the default and of VTK's, each on the mesh loaded "
-              f"again, " if first and len(counts) == 1 and min(counts) > 1 else "")
+    n_first = counts.pop() if len(counts) == 1 else 1  # the same count on every mesh, else not said
+    firsts = (f"first frames the median of {n_first} of the default and of VTK's, each on the mesh loaded again, "
+              if first and n_first > 1 else "")
     return (f"{size}; default: `method=\"auto\"` (tet marching unless the scene needs projected tetrahedra or the cost model predicts them clearly faster, see above); "
             f"median of {r['repeats']} view changes, frames in turn, {firsts}{r.get('gl_renderer', '?')}, "
             f"VTK {r.get('vtk_version', '?')}; PSNR (dB) of premultiplied RGB against the exact reference "

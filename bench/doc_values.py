@@ -230,8 +230,8 @@ def march_parts() -> str:
 def march_ceiling() -> str:
     """bench/README.md: what the default could reach against VTK at 1024x1024 were every
     measured part of a step but the walk free (bench/march_parts.py, bench/vs_vtk.py)."""
-    parts = _load(RESULTS / "march_parts.json")
-    runs = {m["name"].split(" (")[0]: m for m in _load(RESULTS / "vs_vtk_1024.json")["meshes"]}
+    parts, run = _load(RESULTS / "march_parts.json"), _load(RESULTS / "vs_vtk_1024.json")
+    runs = {m["name"].split(" (")[0]: m for m in run["meshes"]}
     found = []
     for m in parts["meshes"]:
         name = m["name"].removesuffix(".vtu").removesuffix("_tets")
@@ -241,7 +241,7 @@ def march_ceiling() -> str:
         ratio = rec["speedup_vs_vtk_pt"].get("tetvr_march", rec["speedup_vs_vtk_pt"]["tetvr"])
         free = sum(max(p["share"], 0.0) for p in m["parts"].values())
         found.append((name.split('_')[0], ratio / (1.0 - free), ratio))
-    wanted = _load(RESULTS / "vs_vtk_1024.json")["target"]["speedup"]
+    wanted = run["target"]["speedup"]
     below = [n for n, ceiling, _ in found if ceiling < wanted]
     return (", ".join(f"{n} {c:.1f}x (now {r:.2f}x)" for n, c, r in found)
             + (f"; below the {wanted:g}x target even so: {', '.join(below)}" if below else ""))

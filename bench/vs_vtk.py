@@ -183,27 +183,18 @@ def bench_mesh(name: str, mesh: TetMesh, size: tuple[int, int], ref_size: tuple[
     renderers: dict[str, Any] = {}
     first: dict[str, float] = {}
     images: dict[str, np.ndarray] = {}
-    samples: dict[str, list[float]] = {k: [] for k in keys}
-    cpu: dict[str, list[float]] = {k: [] for k in keys}
     try:
-        # First frame: creation, upload, table / colour mapping, first sort and draw; the
-        # default's on the mesh as loaded (what it works out about a mesh it keeps with it).
-        # Then what "auto" takes for each timed view; where it is not tet marching, that is
-        # timed too.
-        for key in keys + ("auto",):
-            if key == "auto":
-                rec["auto_method"] = [choose(RenderSettings(), mesh, cam, size) for cam in cams[1:]]
-                if set(rec["auto_method"]) == {"raymarch"}:
-                    break
-                key = "tetvr_march"
-                keys += (key,)
-                samples[key], cpu[key] = [], []
-            t0 = time.perf_counter()
-            renderers[key] = _make(key, mesh, tf, size)
-            images[key] = renderers[key].frame(mesh, cam0, tf, size)
-            first[key] = time.perf_counter() - t0
-            if key == "vtk_pt":  # from the window's creation, in the VTK process
-                first[key] = renderers[key].renderer.first_seconds
+        # First frames, the default's on the mesh as loaded (what tetvr works out about a mesh
+        # it keeps with it). Then what "auto" takes for each timed view; where it is not tet
+        # marching, that is timed too.
+        for key in keys:
+            renderers[key], images[key], first[key] = _first_frame(key, mesh, cam0, tf, size)
+        rec["auto_method"] = [choose(RenderSettings(), mesh, cam, size) for cam in cams[1:]]
+        if set(rec["auto_method"]) != {"raymarch"}:
+            keys += ("tetvr_march",)
+            renderers[keys[-1]], images[keys[-1]], first[keys[-1]] = _first_frame(keys[-1], mesh, cam0, tf, size)
+        samples: dict[str, list[float]] = {k: [] for k in keys}
+        cpu: dict[str, list[float]] = {k: [] for k in keys}
         # Warm-up view change, then R timed view changes, renderers in turn.
         for i, cam in enumerate(cams):
             for key in keys:
@@ -247,6 +238,22 @@ def bench_mesh(name: str, mesh: TetMesh, size: tuple[int, int], ref_size: tuple[
     return rec, pics
 
 
+def _first_frame(key: str, mesh: TetMesh, camera: Camera, tf: Any, size: tuple[int, int]
+                 ) -> tuple[Any, np.ndarray, float]:
+    """A new renderer ``key``, its first image and its first frame's seconds: creation,
+    upload, table / colour mapping, first sort and draw (VTK's from its window's creation,
+    in its process)."""
+    t0 = time.perf_counter()
+    renderer = _make(key, mesh, tf, size)
+    try:
+        image = renderer.frame(mesh, camera, tf, size)
+    except BaseException:
+        renderer.release()
+        raise
+    seconds = time.perf_counter() - t0
+    return renderer, image, renderer.renderer.first_seconds if key == "vtk_pt" else seconds
+
+
 def first_frames_again(rec: dict[str, Any], load: Callable[[], TetMesh], size: tuple[int, int], times: int) -> None:
     """``times`` more first frames of tetvr's default and of VTK's PT, in turn (which goes
     first alternates), each on the mesh loaded afresh with tetvr's table caches emptied, as a
@@ -262,13 +269,9 @@ def first_frames_again(rec: dict[str, Any], load: Callable[[], TetMesh], size: t
         for key in (("tetvr", "vtk_pt") if i % 2 else ("vtk_pt", "tetvr")):
             preintegrate.cache_clear()
             tablesize.cache_clear()
-            t0 = time.perf_counter()
-            r = _make(key, mesh, tf, size)
-            try:
-                r.frame(mesh, cam, tf, size)
-                samples[key].append(r.renderer.first_seconds if key == "vtk_pt" else time.perf_counter() - t0)
-            finally:
-                r.release()
+            renderer, _, seconds = _first_frame(key, mesh, cam, tf, size)
+            renderer.release()
+            samples[key].append(seconds)
         del mesh
     rec["first_frame_samples_s"] = samples
     for key, values in samples.items():

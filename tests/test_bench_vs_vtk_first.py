@@ -44,8 +44,9 @@ def test_first_frames_again(vs_vtk, monkeypatch):
         return loads[-1]
 
     monkeypatch.setattr(vs_vtk, "_make", make)
-    # perf_counter: VTK's start, the default's start and end; the default's start and end, VTK's start.
-    monkeypatch.setattr(vs_vtk, "time", types.SimpleNamespace(perf_counter=iter([0.0, 0.0, 0.2, 1.0, 1.4, 0.0]).__next__))
+    # perf_counter, each first frame's start and end: VTK's, the default's; the default's, VTK's.
+    clock = [0.0, 0.0, 0.0, 0.2, 1.0, 1.4, 0.0, 0.0]
+    monkeypatch.setattr(vs_vtk, "time", types.SimpleNamespace(perf_counter=iter(clock).__next__))
     preintegrate.table_for(vs_vtk.default_transfer_function(synthetic.cube(2)), (0.0, 1.0), 1.0, n_bins=4, n_slices=2)
     rec = {"first_frame_s": {"tetvr": 0.3, "tetvr_projected": 0.2, "vtk_pt": 0.6}}
     vs_vtk.first_frames_again(rec, load, (8, 8), 2)

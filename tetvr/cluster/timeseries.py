@@ -320,8 +320,9 @@ def _steps_done(c: Any, items: list[_Step], submit: Callable[[Any, str, int, int
         while todo and (len(pending) + len(done) < window or (ordered and todo[-1] == turn)):
             i = todo.pop()
             pending[send(i, tries[i])] = i
-        if not pending and ordered and turn not in done and turn not in todo:
-            # Nothing would move: a bug, raised here rather than spinning for ever.
+        if not pending and ordered and turn not in done:
+            # (Were ``turn`` to send, the loop above would have sent it.) Nothing would move:
+            # a bug, raised here rather than spinning for ever.
             raise RuntimeError(f"{what}: step {turn} is neither sent, nor done, nor to send")
         if pending:
             fut = next(as_completed(c, list(pending), what))

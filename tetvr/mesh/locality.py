@@ -60,27 +60,30 @@ def morton_order(points: NDArray[np.float64], bits: int = BITS) -> NDArray[np.in
     f = p - lo  # >= 0: lo is the least
     f *= scale
     np.minimum(f, 2**bits - 1, out=f)
-    index_bits = max(1, (n - 1).bit_length())
-    if bits > 21 or 3 * bits + index_bits > 64:  # bit by bit, and a stable sort
+    if bits > 21:  # more than a 64-bit word's third: bit by bit
         q = f.astype(np.uint64)
         code = np.zeros(n, dtype=np.uint64)
         for b in range(bits):
             for axis in range(3):
                 code |= ((q[:, axis] >> np.uint64(b)) & np.uint64(1)) << np.uint64(3 * b + axis)
+    else:
+        # Bit b of axis a goes to bit 3b + a: each axis's bits spread two apart by shifts and
+        # masks (in 32-bit words where the code fits one).
+        word, spread = (np.uint32, _SPREAD_32) if 3 * bits <= 32 else (np.uint64, _SPREAD_64)
+        q = f.astype(word)
+        code = np.zeros(n, dtype=word)
+        for axis in range(3):
+            x = np.ascontiguousarray(q[:, axis])
+            for shift, mask in spread:
+                x = (x | (x << word(shift))) & word(mask)
+            code |= x << word(axis)
+        code = code.astype(np.uint64)
+    index_bits = max(1, (n - 1).bit_length())
+    if 3 * bits + index_bits > 64:
         return np.argsort(code, kind="stable")
-    # Bit b of axis a goes to bit 3b + a: each axis's bits spread two apart by shifts and
-    # masks (in 32-bit words where the code fits one). The index below the code makes every
-    # key distinct, so that any sort keeps points in one lattice cell in their order, and
-    # the sorted keys hold the order itself.
-    word, spread = (np.uint32, _SPREAD_32) if 3 * bits <= 32 else (np.uint64, _SPREAD_64)
-    q = f.astype(word)
-    code = np.zeros(n, dtype=word)
-    for axis in range(3):
-        x = np.ascontiguousarray(q[:, axis])
-        for shift, mask in spread:
-            x = (x | (x << word(shift))) & word(mask)
-        code |= x << word(axis)
-    key = np.sort((code.astype(np.uint64) << np.uint64(index_bits)) | np.arange(n, dtype=np.uint64))
+    # The index below the code makes every key distinct, so that any sort keeps points in
+    # one lattice cell in their order, and the sorted keys hold the order itself.
+    key = np.sort((code << np.uint64(index_bits)) | np.arange(n, dtype=np.uint64))
     return (key & np.uint64((1 << index_bits) - 1)).astype(np.intp)
 
 
